@@ -1,0 +1,23 @@
+//! The types that flow out of every tacmesh depth source, and the trait a source implements.
+//!
+//! Entry points:
+//! - [`DepthSource`]: a backend that yields timestamped [`Observation`]s.
+//! - [`DepthFrame`] with its [`Intrinsics`]: one organised depth image from a camera.
+//! - [`PointCloud`]: points (and optional normals) in metres, in one named frame.
+//! - [`TriMesh`]: an indexed triangle mesh in metres.
+//!
+//! This crate is a leaf: backends, the simulator and the daemon depend on it, it depends on
+//! nothing of theirs.
+
+mod cloud;
+mod frame;
+mod mesh;
+mod source;
+
+pub use cloud::PointCloud;
+pub use frame::{DepthFrame, Intrinsics};
+pub use mesh::TriMesh;
+pub use source::{DepthSource, Observation, SourceError};
+
+/// Re-exported so that users of these types agree on one `glam` version.
+pub use glam;

@@ -1,0 +1,1 @@
+//! Point-cloud and mesh files: PLY, PCD, XYZ and OBJ. (Being written.)

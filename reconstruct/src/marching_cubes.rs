@@ -1,0 +1,1 @@
+//! Marching cubes over a sparse signed distance. (Being written.)

@@ -1,0 +1,1 @@
+//! Edge-collapse simplification. (Being written.)
