@@ -1,1 +1,194 @@
-//! Point-cloud and mesh files: PLY, PCD, XYZ and OBJ. (Being written.)
+//! Point-cloud and mesh files: PLY, PCD, XYZ and OBJ.
+//!
+//! Entry points, each choosing the format by the file's extension:
+//! - [`read_cloud`]: `.ply`, `.pcd`, `.xyz`/`.txt`/`.pts` to a [`PointCloud`] of finite points.
+//! - [`read_mesh`]: `.obj`, `.ply` to a [`TriMesh`] (polygons fan-triangulated).
+//! - [`write_cloud`]: `.ply` (binary little-endian) or `.xyz` (text).
+//! - [`write_mesh`]: `.ply` (binary little-endian) or `.obj` (text).
+//!
+//! One module per format, each with a parser over bytes that needs no file
+//! ([`ply::parse_cloud`], [`pcd::parse`], [`xyz::parse`], [`obj::parse`]) and, where the format
+//! is written, a writer to any `io::Write`. [`pcd::read_pcd`] keeps what a PCD has beyond a
+//! cloud: the organised grid with its invalid points, per-point labels and colours.
+//!
+//! Every error names the file and says what is wrong with it; no input makes a reader panic.
+
+pub mod obj;
+pub mod pcd;
+pub mod ply;
+pub mod xyz;
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+use tacmesh_source::{PointCloud, TriMesh};
+
+/// Why a file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    /// The operating system refused: missing file, no permission, full disk.
+    #[error("{name}: cannot {action}: {error}")]
+    Io {
+        name: String,
+        action: &'static str,
+        error: std::io::Error,
+    },
+    /// The extension does not name a format this crate handles in this direction.
+    #[error("{name}: unsupported extension; {what} can be {supported}")]
+    UnsupportedExtension {
+        name: String,
+        what: &'static str,
+        supported: &'static str,
+    },
+    /// The contents are not a valid file of the format its extension names.
+    #[error("{name}: {reason}")]
+    Malformed { name: String, reason: String },
+    /// The data handed to a writer cannot be written as a valid file.
+    #[error("{name}: cannot write: {reason}")]
+    Unwritable { name: String, reason: String },
+}
+
+impl FormatError {
+    pub(crate) fn malformed(name: &str, reason: impl Into<String>) -> Self {
+        Self::Malformed {
+            name: name.to_owned(),
+            reason: reason.into(),
+        }
+    }
+}
+
+const CLOUD_READ_EXTENSIONS: &str = ".ply, .pcd, .xyz, .txt or .pts";
+const MESH_READ_EXTENSIONS: &str = ".obj or .ply";
+const CLOUD_WRITE_EXTENSIONS: &str = ".ply or .xyz";
+const MESH_WRITE_EXTENSIONS: &str = ".ply or .obj";
+
+/// Reads a point cloud, choosing the format by extension, and drops every point with a
+/// non-finite coordinate (an organised PCD's invalid pixels, for one). Normals are kept when
+/// the file has them: PLY `nx ny nz`, PCD `normal_x normal_y normal_z`, XYZ's 6-column form.
+pub fn read_cloud(path: &Path) -> Result<PointCloud, FormatError> {
+    let name = path.display().to_string();
+    let parse: fn(&[u8], &str) -> Result<PointCloud, FormatError> = match extension(path).as_str() {
+        "ply" => ply::parse_cloud,
+        "pcd" => |bytes, name| pcd::parse(bytes, name).map(pcd::PcdCloud::into_cloud),
+        "xyz" | "txt" | "pts" => xyz::parse,
+        _ => {
+            return Err(FormatError::UnsupportedExtension {
+                name,
+                what: "point clouds",
+                supported: CLOUD_READ_EXTENSIONS,
+            })
+        }
+    };
+    let mut cloud = parse(&read_bytes(path)?, &name)?;
+    let dropped = cloud.retain_finite();
+    if dropped > 0 {
+        tracing::debug!("{name}: dropped {dropped} points with non-finite coordinates");
+    }
+    Ok(cloud)
+}
+
+/// Reads a triangle mesh, choosing the format by extension. Vertices keep the file's order.
+pub fn read_mesh(path: &Path) -> Result<TriMesh, FormatError> {
+    let name = path.display().to_string();
+    let parse: fn(&[u8], &str) -> Result<TriMesh, FormatError> = match extension(path).as_str() {
+        "obj" => obj::parse,
+        "ply" => ply::parse_mesh,
+        _ => {
+            return Err(FormatError::UnsupportedExtension {
+                name,
+                what: "meshes",
+                supported: MESH_READ_EXTENSIONS,
+            })
+        }
+    };
+    parse(&read_bytes(path)?, &name)
+}
+
+/// Writes a mesh as binary little-endian `.ply` or as text `.obj`, by extension.
+pub fn write_mesh(path: &Path, mesh: &TriMesh) -> Result<(), FormatError> {
+    let name = path.display().to_string();
+    let write: fn(&mut BufWriter<File>, &TriMesh) -> std::io::Result<()> =
+        match extension(path).as_str() {
+            "ply" => ply::write_mesh,
+            "obj" => obj::write,
+            _ => {
+                return Err(FormatError::UnsupportedExtension {
+                    name,
+                    what: "meshes",
+                    supported: MESH_WRITE_EXTENSIONS,
+                })
+            }
+        };
+    if let Some((triangle, vertex)) = mesh.first_bad_index() {
+        return Err(FormatError::Unwritable {
+            name,
+            reason: format!(
+                "triangle {triangle} refers to vertex {vertex} but there are {} vertices",
+                mesh.vertices.len()
+            ),
+        });
+    }
+    write_file(path, &name, |out| write(out, mesh))
+}
+
+/// Writes a cloud as binary little-endian `.ply` (x y z, plus nx ny nz when it has normals) or
+/// as text `.xyz`, by extension.
+pub fn write_cloud(path: &Path, cloud: &PointCloud) -> Result<(), FormatError> {
+    let name = path.display().to_string();
+    let write: fn(&mut BufWriter<File>, &PointCloud) -> std::io::Result<()> =
+        match extension(path).as_str() {
+            "ply" => ply::write_cloud,
+            "xyz" => xyz::write,
+            _ => {
+                return Err(FormatError::UnsupportedExtension {
+                    name,
+                    what: "point clouds",
+                    supported: CLOUD_WRITE_EXTENSIONS,
+                })
+            }
+        };
+    if let Some(normals) = &cloud.normals {
+        if normals.len() != cloud.points.len() {
+            return Err(FormatError::Unwritable {
+                name,
+                reason: format!(
+                    "the cloud has {} points but {} normals",
+                    cloud.points.len(),
+                    normals.len()
+                ),
+            });
+        }
+    }
+    write_file(path, &name, |out| write(out, cloud))
+}
+
+/// The extension in lower case, or "" when there is none.
+fn extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, FormatError> {
+    std::fs::read(path).map_err(|error| FormatError::Io {
+        name: path.display().to_string(),
+        action: "read",
+        error,
+    })
+}
+
+fn write_file(
+    path: &Path,
+    name: &str,
+    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> Result<(), FormatError> {
+    let io_error = |error| FormatError::Io {
+        name: name.to_owned(),
+        action: "write",
+        error,
+    };
+    let mut out = BufWriter::new(File::create(path).map_err(io_error)?);
+    write(&mut out).and_then(|()| out.flush()).map_err(io_error)
+}

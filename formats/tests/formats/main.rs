@@ -1,0 +1,9 @@
+//! Integration tests of `tacmesh-formats`: real sample files from `shared/data`, round trips
+//! through files, rejection of broken files, and a seeded mangling run that must never panic.
+
+mod util;
+
+mod mangle;
+mod real_data;
+mod rejection;
+mod round_trip;
