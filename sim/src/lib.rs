@@ -1,1 +1,148 @@
-//! Ground truth for tacmesh. (Being written.)
+//! Ground truth for tacmesh: the paper's test shapes, seeded noisy surface sampling, and the
+//! mean Hausdorff error (MHE) metric that Table 1 reports.
+//!
+//! Entry points:
+//! - [`Shape`]: the six Blender primitives of the paper's Table 1 ([`Shape::ALL`], in table
+//!   order). [`Shape::blender_mesh`] is Blender's default primitive in Blender units and axes;
+//!   [`Shape::mesh`] is the same fitted into a 1 m bounding box ([`fit_to_extent`]).
+//! - [`cube`], [`cylinder`], [`cone`], [`uv_sphere`], [`torus`]: the same primitives with other
+//!   resolutions, for tests and benchmarks that need denser meshes.
+//! - [`SurfaceSampler`]: area-weighted Monte-Carlo points on a mesh surface, reproducible from a
+//!   `u64` seed; [`sample_cloud`] with a [`SampleConfig`] adds isotropic Gaussian noise and
+//!   returns the synthetic scan as a [`PointCloud`](tacmesh_source::PointCloud).
+//! - [`mesh_distance`]: the symmetric sampled surface distance between two meshes
+//!   ([`MeshDistance::mhe_m`] is the paper's MHE; use [`PAPER_SAMPLES`] per side);
+//!   [`point_to_mesh_distances`] gives the exact unsigned distance from points to a surface.
+//!
+//! Everything here is deterministic: the same inputs and seed give bit-identical outputs
+//! whatever the thread count (see `sampling.rs` for the one cross-platform caveat, the
+//! Gaussian noise's rare libm calls).
+
+mod metric;
+mod sampling;
+mod shapes;
+
+use glam::Vec3;
+use tacmesh_source::TriMesh;
+
+pub use metric::{mesh_distance, point_to_mesh_distances, MeshDistance, PAPER_SAMPLES};
+pub use sampling::{sample_cloud, SampleConfig, SurfaceSampler};
+pub use shapes::{cone, cube, cylinder, fit_to_extent, torus, uv_sphere, Shape};
+
+/// Why a mesh could not be sampled or measured.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("the mesh has no triangles: there is no surface to sample or measure against (did reconstruction or simplification return an empty mesh?)")]
+    EmptyMesh,
+
+    #[error("triangle {triangle} refers to vertex {index} but the mesh has only {vertices} vertices: the index buffer is corrupt or belongs to another vertex list")]
+    IndexOutOfRange {
+        triangle: usize,
+        index: u32,
+        vertices: usize,
+    },
+
+    #[error("vertex {vertex} is not finite ({position}): remove NaN or infinite vertices before sampling or measuring")]
+    NonFiniteVertex { vertex: usize, position: Vec3 },
+
+    #[error("the mesh's {triangles} triangles have zero total area, so no point can be sampled on them: check the mesh's scale and whether all its triangles collapsed")]
+    ZeroArea { triangles: usize },
+
+    #[error("query point {index} is not finite ({position}): drop NaN or infinite points before measuring distances")]
+    NonFinitePoint { index: usize, position: Vec3 },
+
+    #[error("noise sigma must be a finite number of metres >= 0, got {sigma_m}")]
+    InvalidNoise { sigma_m: f32 },
+
+    #[error("samples per side must be at least 1 (the paper uses {paper})", paper = PAPER_SAMPLES)]
+    NoSamples,
+
+    #[error("in the {role} mesh")]
+    InMesh {
+        /// `"reference"` or `"candidate"`.
+        role: &'static str,
+        #[source]
+        source: Box<SimError>,
+    },
+}
+
+impl SimError {
+    /// Tags an error with the mesh it concerns (`"reference"` or `"candidate"`).
+    fn in_mesh(role: &'static str) -> impl FnOnce(SimError) -> SimError {
+        move |source| SimError::InMesh {
+            role,
+            source: Box::new(source),
+        }
+    }
+
+    /// The underlying error, looking through [`SimError::InMesh`].
+    pub fn root(&self) -> &SimError {
+        match self {
+            SimError::InMesh { source, .. } => source.root(),
+            other => other,
+        }
+    }
+}
+
+/// Checks what every consumer here needs: at least one triangle, indices in range and finite
+/// vertices. Zero-area triangles are allowed (they still have well-defined distances).
+fn check_mesh(mesh: &TriMesh) -> Result<(), SimError> {
+    if mesh.triangles.is_empty() {
+        return Err(SimError::EmptyMesh);
+    }
+    if let Some((triangle, index)) = mesh.first_bad_index() {
+        return Err(SimError::IndexOutOfRange {
+            triangle,
+            index,
+            vertices: mesh.vertices.len(),
+        });
+    }
+    if let Some((vertex, &position)) = mesh
+        .vertices
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !v.is_finite())
+    {
+        return Err(SimError::NonFiniteVertex { vertex, position });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn check_mesh_names_the_first_defect() {
+        assert!(matches!(
+            check_mesh(&TriMesh::default()),
+            Err(SimError::EmptyMesh)
+        ));
+        let bad_index = TriMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 7]]);
+        assert!(matches!(
+            check_mesh(&bad_index),
+            Err(SimError::IndexOutOfRange {
+                triangle: 0,
+                index: 7,
+                vertices: 3
+            })
+        ));
+        let nan = TriMesh::new(
+            vec![Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Y],
+            vec![[0, 1, 2]],
+        );
+        assert!(matches!(
+            check_mesh(&nan),
+            Err(SimError::NonFiniteVertex { vertex: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn in_mesh_error_says_which_mesh_and_keeps_the_cause() {
+        let err = SimError::in_mesh("candidate")(SimError::EmptyMesh);
+        assert_eq!(err.to_string(), "in the candidate mesh");
+        assert!(matches!(err.root(), SimError::EmptyMesh));
+        let source = std::error::Error::source(&err).map(|s| s.to_string());
+        assert_eq!(source, Some(SimError::EmptyMesh.to_string()));
+    }
+}
