@@ -1,0 +1,131 @@
+//! The fused state of an object: point moments per voxel, in a sparse hash map.
+//!
+//! Integrating a frame adds each new point to its voxel's moments, so the cost follows the new
+//! data, not the object's history, and the state stays bounded by the object's surface area.
+//! Voxel `ijk` covers `[ijk, ijk + 1) · voxel_size_m` in the object's frame (origin at 0, so two
+//! grids of the same size line up).
+
+use glam::{IVec3, Vec3};
+use rustc_hash::FxHashMap;
+
+use crate::moments::PointMoments;
+
+/// Sparse voxel grid of point moments.
+#[derive(Debug, Clone)]
+pub struct MomentGrid {
+    voxel_size_m: f32,
+    cells: FxHashMap<IVec3, PointMoments>,
+}
+
+impl MomentGrid {
+    pub fn new(voxel_size_m: f32) -> Self {
+        Self {
+            voxel_size_m,
+            cells: FxHashMap::default(),
+        }
+    }
+
+    pub fn voxel_size_m(&self) -> f32 {
+        self.voxel_size_m
+    }
+
+    /// The voxel holding `p`.
+    pub fn cell_of(&self, p: Vec3) -> IVec3 {
+        (p / self.voxel_size_m).floor().as_ivec3()
+    }
+
+    /// Adds finite points to their voxels; returns how many were added.
+    pub fn integrate(&mut self, points: &[Vec3]) -> usize {
+        let mut added = 0;
+        for &p in points.iter().filter(|p| p.is_finite()) {
+            self.cells.entry(self.cell_of(p)).or_default().add_point(p);
+            added += 1;
+        }
+        added
+    }
+
+    pub fn get(&self, cell: IVec3) -> Option<&PointMoments> {
+        self.cells.get(&cell)
+    }
+
+    /// Occupied voxels in a fixed order (z, y, x), so results never depend on hash order.
+    pub fn sorted_cells(&self) -> Vec<IVec3> {
+        let mut keys: Vec<IVec3> = self.cells.keys().copied().collect();
+        keys.sort_unstable_by_key(|k| (k.z, k.y, k.x));
+        keys
+    }
+
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
+    /// The same points in voxels `factor` times larger (moments add, so no point is revisited).
+    pub fn coarsened(&self, factor: i32) -> MomentGrid {
+        let mut coarse = MomentGrid::new(self.voxel_size_m * factor as f32);
+        for cell in self.sorted_cells() {
+            let parent = cell.div_euclid(IVec3::splat(factor));
+            if let Some(m) = self.cells.get(&cell) {
+                *coarse.cells.entry(parent).or_default() += m;
+            }
+        }
+        coarse
+    }
+
+    /// Sum of the moments of the voxels within `radius` voxels (a cube) of `cell`.
+    pub fn neighbourhood(&self, cell: IVec3, radius: i32) -> PointMoments {
+        let mut sum = PointMoments::default();
+        for dz in -radius..=radius {
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    if let Some(m) = self.cells.get(&(cell + IVec3::new(dx, dy, dz))) {
+                        sum += m;
+                    }
+                }
+            }
+        }
+        sum
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integrate_skips_non_finite_points() {
+        let mut grid = MomentGrid::new(0.1);
+        let added = grid.integrate(&[Vec3::ZERO, Vec3::NAN, Vec3::new(0.05, 0.0, 0.0)]);
+        assert_eq!(added, 2);
+        assert_eq!(grid.len(), 1);
+        assert_eq!(grid.get(IVec3::ZERO).map(|m| m.count), Some(2.0));
+    }
+
+    #[test]
+    fn negative_coordinates_land_in_negative_cells() {
+        let grid = MomentGrid::new(0.1);
+        assert_eq!(
+            grid.cell_of(Vec3::new(-0.01, 0.15, -0.2)),
+            IVec3::new(-1, 1, -2)
+        );
+    }
+
+    #[test]
+    fn coarsening_keeps_every_point() {
+        let mut grid = MomentGrid::new(0.1);
+        grid.integrate(&[Vec3::splat(0.05), Vec3::splat(0.15), Vec3::splat(-0.05)]);
+        let coarse = grid.coarsened(2);
+        assert_eq!(coarse.get(IVec3::ZERO).map(|m| m.count), Some(2.0));
+        assert_eq!(coarse.get(IVec3::splat(-1)).map(|m| m.count), Some(1.0));
+    }
+
+    #[test]
+    fn neighbourhood_sums_adjacent_cells_only() {
+        let mut grid = MomentGrid::new(1.0);
+        grid.integrate(&[Vec3::splat(0.5), Vec3::splat(1.5), Vec3::splat(3.5)]);
+        assert_eq!(grid.neighbourhood(IVec3::ZERO, 1).count, 2.0);
+    }
+}

@@ -1,0 +1,223 @@
+//! The whole reconstruction in pipeline order: moments per voxel → a tangent plane per voxel →
+//! orientation → signed distance near the data → marching cubes → drop noise fragments.
+//!
+//! Entry points: [`reconstruct_surface`] for one cloud, [`mesh_moment_grid`] for a fused state
+//! that grows frame by frame.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use tacmesh_source::{PointCloud, TriMesh};
+
+use crate::cell_planes::{fit_cell_planes, orient_by_propagation, orient_towards, TwoScaleGrid};
+use crate::marching_cubes::marching_cubes;
+use crate::moment_grid::MomentGrid;
+use crate::signed_distance::{signed_distance_near, SignedDistanceConfig};
+use crate::ReconstructError;
+
+/// How normals get a consistent sign.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Orientation {
+    /// Every normal faces this sensor position (one-view scans; what the daemon uses).
+    TowardsViewpoint(Vec3),
+    /// Hoppe's spanning-tree propagation (merged scans, sampled shapes, files with no viewpoint).
+    Propagate,
+}
+
+/// Reconstruction settings, units in the names.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReconstructConfig {
+    /// Voxel edge of the fused moments and of marching cubes, metres.
+    pub voxel_size_m: f32,
+    /// Voxels with fewer points than this in the 4×4×4-voxel box around them are noise.
+    pub min_points: f32,
+    /// Grid corners with no plane within this many voxels stay unknown (and the mesh open).
+    pub band_voxels: i32,
+    /// Width of the signed distance's Gaussian weight, voxels.
+    pub kernel_width_voxels: f32,
+    pub orientation: Orientation,
+    /// Connected pieces with fewer faces than this fraction of the largest piece are noise
+    /// fragments and are dropped.
+    pub min_piece_fraction: f32,
+}
+
+impl ReconstructConfig {
+    /// Defaults for a given voxel size.
+    pub fn with_voxel_size(voxel_size_m: f32) -> Self {
+        Self {
+            voxel_size_m,
+            min_points: 8.0,
+            band_voxels: 2,
+            kernel_width_voxels: 1.5,
+            orientation: Orientation::Propagate,
+            min_piece_fraction: 0.02,
+        }
+    }
+}
+
+/// What reconstruction did and how long each stage took.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ReconstructReport {
+    pub points: usize,
+    pub voxels: usize,
+    pub planes: usize,
+    pub faces: usize,
+    pub pieces_dropped: usize,
+    pub integrate_ms: f64,
+    pub normals_ms: f64,
+    pub orient_ms: f64,
+    pub distance_ms: f64,
+    pub marching_cubes_ms: f64,
+}
+
+fn elapsed_ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// Keeps the connected pieces (sharing vertices) with at least `min_fraction` of the largest
+/// piece's faces; returns how many pieces went.
+pub fn drop_small_pieces(mesh: &mut TriMesh, min_fraction: f32) -> usize {
+    let n = mesh.vertices.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    for &[a, b, c] in &mesh.triangles {
+        for (u, v) in [(a, b), (b, c)] {
+            let (ru, rv) = (find(&mut parent, u), find(&mut parent, v));
+            if ru != rv {
+                parent[ru.max(rv) as usize] = ru.min(rv);
+            }
+        }
+    }
+    let mut faces_per_root = vec![0usize; n];
+    let roots: Vec<u32> = mesh
+        .triangles
+        .iter()
+        .map(|t| find(&mut parent, t[0]))
+        .collect();
+    for &r in &roots {
+        faces_per_root[r as usize] += 1;
+    }
+    let largest = faces_per_root.iter().copied().max().unwrap_or(0);
+    let keep_from = (largest as f32 * min_fraction).ceil() as usize;
+    let pieces_before = faces_per_root.iter().filter(|&&f| f > 0).count();
+    let mut kept = roots
+        .iter()
+        .map(|&r| faces_per_root[r as usize] >= keep_from);
+    mesh.triangles.retain(|_| kept.next().unwrap_or(false));
+    let pieces_after = faces_per_root
+        .iter()
+        .filter(|&&f| f >= keep_from.max(1))
+        .count();
+
+    // Drop vertices no triangle uses any more.
+    let mut remap = vec![u32::MAX; n];
+    let mut vertices = Vec::new();
+    for t in &mut mesh.triangles {
+        for i in t.iter_mut() {
+            if remap[*i as usize] == u32::MAX {
+                remap[*i as usize] = vertices.len() as u32;
+                vertices.push(mesh.vertices[*i as usize]);
+            }
+            *i = remap[*i as usize];
+        }
+    }
+    mesh.vertices = vertices;
+    pieces_before - pieces_after
+}
+
+/// Reconstructs the surface of `cloud` as a marching-cubes mesh (dense; simplify it next).
+pub fn reconstruct_surface(
+    cloud: &PointCloud,
+    config: &ReconstructConfig,
+) -> Result<(TriMesh, ReconstructReport), ReconstructError> {
+    if !(config.voxel_size_m.is_finite() && config.voxel_size_m > 0.0) {
+        return Err(ReconstructError::BadVoxelSize {
+            voxel_size_m: config.voxel_size_m,
+        });
+    }
+    let start = Instant::now();
+    let mut grid = MomentGrid::new(config.voxel_size_m);
+    let points = grid.integrate(&cloud.points);
+    let integrate_ms = elapsed_ms(start);
+    let (mesh, mut report) = mesh_moment_grid(&grid, config)?;
+    report.points = points;
+    report.integrate_ms = integrate_ms;
+    Ok((mesh, report))
+}
+
+/// Meshes a fused moment grid (its voxel size wins over `config.voxel_size_m`).
+pub fn mesh_moment_grid(
+    grid: &MomentGrid,
+    config: &ReconstructConfig,
+) -> Result<(TriMesh, ReconstructReport), ReconstructError> {
+    let mut report = ReconstructReport {
+        voxels: grid.len(),
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let two_scale = TwoScaleGrid::new(grid);
+    let mut planes = fit_cell_planes(&two_scale, config.min_points);
+    report.normals_ms = elapsed_ms(start);
+    report.planes = planes.len();
+    if planes.len() < 4 {
+        return Err(ReconstructError::TooFewPoints {
+            voxels: grid.len(),
+            planes: planes.len(),
+        });
+    }
+
+    let start = Instant::now();
+    match config.orientation {
+        Orientation::TowardsViewpoint(viewpoint) => orient_towards(&mut planes, viewpoint),
+        Orientation::Propagate => orient_by_propagation(&mut planes, &two_scale),
+    }
+    report.orient_ms = elapsed_ms(start);
+
+    let start = Instant::now();
+    let sdf = signed_distance_near(
+        &planes,
+        &SignedDistanceConfig {
+            voxel_size_m: grid.voxel_size_m(),
+            band_voxels: config.band_voxels,
+            kernel_width_voxels: config.kernel_width_voxels,
+        },
+    );
+    report.distance_ms = elapsed_ms(start);
+
+    let start = Instant::now();
+    let mut mesh = marching_cubes(&sdf);
+    report.pieces_dropped = drop_small_pieces(&mut mesh, config.min_piece_fraction);
+    report.marching_cubes_ms = elapsed_ms(start);
+    report.faces = mesh.triangles.len();
+    Ok((mesh, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drop_small_pieces_removes_a_lone_fragment() {
+        let mut mesh = TriMesh::new(
+            vec![
+                Vec3::ZERO,
+                Vec3::X,
+                Vec3::Y,
+                Vec3::ONE,
+                Vec3::new(5.0, 0.0, 0.0),
+                Vec3::new(6.0, 0.0, 0.0),
+                Vec3::new(5.0, 1.0, 0.0),
+            ],
+            vec![[0, 1, 2], [1, 3, 2], [0, 3, 1], [4, 5, 6]],
+        );
+        assert_eq!(drop_small_pieces(&mut mesh, 0.5), 1);
+        assert_eq!(mesh.triangles.len(), 3);
+        assert_eq!(mesh.vertices.len(), 4);
+    }
+}
