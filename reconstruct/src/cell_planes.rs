@@ -40,18 +40,36 @@ impl CellPlane {
     }
 }
 
-/// The fused points at two scales: the voxels, and voxels twice as large.
+/// The fused points at two scales: the voxels, and voxels twice as large with their planes.
 pub struct TwoScaleGrid<'a> {
     pub fine: &'a MomentGrid,
     pub coarse: MomentGrid,
+    /// A plane per coarse voxel (see [`fit_coarse_planes`]), unoriented.
+    pub coarse_planes: Vec<CellPlane>,
+    coarse_slot: FxHashMap<IVec3, u32>,
 }
 
 impl<'a> TwoScaleGrid<'a> {
     pub fn new(fine: &'a MomentGrid) -> Self {
+        let coarse = fine.coarsened(2);
+        let coarse_planes = fit_coarse_planes(&coarse);
+        let coarse_slot = coarse_planes
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p.cell, i as u32))
+            .collect();
         Self {
             fine,
-            coarse: fine.coarsened(2),
+            coarse,
+            coarse_planes,
+            coarse_slot,
         }
+    }
+
+    /// The plane of the coarse voxel holding fine voxel `cell`.
+    fn parent_plane(&self, cell: IVec3) -> Option<&CellPlane> {
+        let slot = *self.coarse_slot.get(&cell.div_euclid(IVec3::splat(2)))?;
+        self.coarse_planes.get(slot as usize)
     }
 
     /// Moments of the 4×4×4 fine voxels centred on `cell`: the 2×2×2 coarse voxels on the side
@@ -76,12 +94,12 @@ impl<'a> TwoScaleGrid<'a> {
 
 /// The plane of every coarse voxel, fitted over it and its 26 neighbours (a box six fine voxels
 /// wide); normals unoriented.
-fn fit_coarse_planes(grid: &TwoScaleGrid) -> Vec<CellPlane> {
-    grid.coarse
+fn fit_coarse_planes(coarse: &MomentGrid) -> Vec<CellPlane> {
+    coarse
         .sorted_cells()
         .par_iter()
         .filter_map(|&cell| {
-            let around = grid.coarse.neighbourhood(cell, 1);
+            let around = coarse.neighbourhood(cell, 1);
             let plane = around.plane()?;
             Some(CellPlane {
                 cell,
@@ -99,10 +117,7 @@ fn fit_coarse_planes(grid: &TwoScaleGrid) -> Vec<CellPlane> {
 /// points in a 4-voxel box form a nearly round blob, and their least-spread direction is
 /// little better than random. Normals are unoriented.
 pub fn fit_cell_planes(grid: &TwoScaleGrid, min_points: f32) -> Vec<CellPlane> {
-    let coarse: FxHashMap<IVec3, Vec3> = fit_coarse_planes(grid)
-        .into_iter()
-        .map(|p| (p.cell, p.normal))
-        .collect();
+    let voxel = grid.fine.voxel_size_m();
     grid.fine
         .sorted_cells()
         .par_iter()
@@ -111,10 +126,18 @@ pub fn fit_cell_planes(grid: &TwoScaleGrid, min_points: f32) -> Vec<CellPlane> {
             if around.count < f64::from(min_points.max(3.0)) {
                 return None;
             }
-            let normal = *coarse.get(&cell.div_euclid(IVec3::splat(2)))?;
+            let normal = grid.parent_plane(cell)?.normal;
+            let point = around.centroid()?;
+            // A voxel the surface crosses has its centre within √3/2 voxel of it; one farther
+            // away only holds noise from beside the surface, and its plane (fitted to a box
+            // clipped off the noise) would only bias the distance.
+            let centre = (cell.as_vec3() + 0.5) * voxel;
+            if normal.dot(centre - point).abs() > voxel {
+                return None;
+            }
             Some(CellPlane {
                 cell,
-                point: around.centroid()?,
+                point,
                 normal,
                 points: around.count as f32,
             })
@@ -135,13 +158,16 @@ pub fn orient_towards(planes: &mut [CellPlane], viewpoint: Vec3) {
 /// the coarse voxel and its 26 neighbours) by [`orient_by_spanning_tree`], then flip each fine
 /// plane to agree with its coarse parent.
 pub fn orient_by_propagation(planes: &mut [CellPlane], grid: &TwoScaleGrid) {
-    let mut coarse = fit_coarse_planes(grid);
+    let mut coarse = grid.coarse_planes.clone();
     orient_by_spanning_tree(&mut coarse);
-    let parent_normal: FxHashMap<IVec3, Vec3> = coarse.iter().map(|p| (p.cell, p.normal)).collect();
     planes.par_iter_mut().for_each(|plane| {
         let parent = plane.cell.div_euclid(IVec3::splat(2));
-        if let Some(n) = parent_normal.get(&parent) {
-            if plane.normal.dot(*n) < 0.0 {
+        let oriented = grid
+            .coarse_slot
+            .get(&parent)
+            .and_then(|&i| coarse.get(i as usize));
+        if let Some(parent) = oriented {
+            if plane.normal.dot(parent.normal) < 0.0 {
                 plane.normal = -plane.normal;
             }
         }
@@ -174,7 +200,7 @@ impl PartialOrd for GraphEdge {
 }
 
 /// Consistent orientation with no viewpoint (Hoppe 1992 §4.2): a minimum spanning tree over
-/// the planes of touching voxels (26-neighbourhood) with edge cost `1 − |nᵢ·nⱼ|`, so the sign
+/// the planes of voxels sharing a face with edge cost `1 − |nᵢ·nⱼ|`, so the sign
 /// travels first across nearly parallel planes and only then around sharp bends; each reached
 /// normal is flipped to agree with its parent. Every connected part starts at its highest
 /// plane, oriented to +z (outward, for a closed surface or one seen from above).
@@ -223,17 +249,22 @@ fn push_edges(
     heap: &mut BinaryHeap<GraphEdge>,
 ) {
     let here = planes[from as usize];
-    for dz in -1..=1 {
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let Some(&to) = slot.get(&(here.cell + IVec3::new(dx, dy, dz))) else {
-                    continue;
-                };
-                if !reached[to as usize] {
-                    let cost = 1.0 - here.normal.dot(planes[to as usize].normal).abs();
-                    heap.push(GraphEdge { cost, to, from });
-                }
-            }
+    // Face neighbours only: the noisy surface is several voxels thick, so it stays connected,
+    // and the tree is built from a quarter of the edges of the full 26-neighbourhood.
+    for step in [
+        IVec3::X,
+        IVec3::NEG_X,
+        IVec3::Y,
+        IVec3::NEG_Y,
+        IVec3::Z,
+        IVec3::NEG_Z,
+    ] {
+        let Some(&to) = slot.get(&(here.cell + step)) else {
+            continue;
+        };
+        if !reached[to as usize] {
+            let cost = 1.0 - here.normal.dot(planes[to as usize].normal).abs();
+            heap.push(GraphEdge { cost, to, from });
         }
     }
 }

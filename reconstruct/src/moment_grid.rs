@@ -37,6 +37,8 @@ impl MomentGrid {
     /// Adds finite points to their voxels; returns how many were added.
     pub fn integrate(&mut self, points: &[Vec3]) -> usize {
         let mut added = 0;
+        // Scans hold a few points per voxel; reserving for that avoids rehashing as it fills.
+        self.cells.reserve(points.len() / 4);
         for &p in points.iter().filter(|p| p.is_finite()) {
             self.cells.entry(self.cell_of(p)).or_default().add_point(p);
             added += 1;

@@ -26,7 +26,7 @@ pub struct SignedDistanceConfig {
     /// A corner averages the planes of the voxels within this many voxels (and is unknown
     /// when there are none).
     pub band_voxels: i32,
-    /// Width of the Gaussian weight on the distance from a corner to a plane's point, voxels.
+    /// Radius of the weight on the distance from a corner to a plane's point, voxels.
     pub kernel_width_voxels: f32,
 }
 
@@ -51,7 +51,43 @@ fn blocks_near_planes(planes: &[CellPlane], band: i32) -> Vec<IVec3> {
     blocks
 }
 
+/// A plane as the corner loop reads it; `weight == 0` marks a voxel with none.
+#[derive(Clone, Copy)]
+struct WindowPlane {
+    point: Vec3,
+    normal: Vec3,
+    /// `normal · point`, so the signed distance is `normal · x − offset_m`.
+    offset_m: f32,
+    weight: f32,
+}
+
+impl WindowPlane {
+    const EMPTY: Self = Self {
+        point: Vec3::ZERO,
+        normal: Vec3::ZERO,
+        offset_m: 0.0,
+        weight: 0.0,
+    };
+
+    fn new(plane: &CellPlane) -> Self {
+        Self {
+            point: plane.point,
+            normal: plane.normal,
+            offset_m: plane.normal.dot(plane.point),
+            // Support squared: a box centred on the surface holds several times the points of
+            // one centred in the noise fringe beside it, and its plane should outvote the
+            // fringe's.
+            weight: plane.points * plane.points,
+        }
+    }
+}
+
 /// Evaluates one block's corners from a dense window of the planes around it.
+///
+/// The kernel is `(1 − d²/h²)²` inside `h` (Wendland-like, compact and cheaper than a
+/// Gaussian), `h = kernel_width_voxels · voxel`; planes farther than `h` from a corner do not
+/// count, and a corner with none stays unknown. A summed-volume table of plane counts lets a
+/// corner with no plane in its window be skipped without reading the window.
 fn evaluate_block(
     key: IVec3,
     planes: &[CellPlane],
@@ -62,15 +98,34 @@ fn evaluate_block(
     let band = config.band_voxels;
     let window = BLOCK_EDGE + 2 * band;
     let window_min = key * BLOCK_EDGE - IVec3::splat(band);
-    let mut dense: Vec<u32> = vec![u32::MAX; (window * window * window) as usize];
+    let at = |x: i32, y: i32, z: i32| (x + window * (y + window * z)) as usize;
+    // The window's planes copied next to each other: the corner loop below reads each one up to
+    // 64 times, and chasing indices into the global plane list was the stage's main cost.
+    let mut dense: Vec<WindowPlane> = vec![WindowPlane::EMPTY; (window * window * window) as usize];
+    // counts[(x+1, y+1, z+1)] = planes in window cells [0, x] × [0, y] × [0, z].
+    let side = window + 1;
+    let at_count = |x: i32, y: i32, z: i32| (x + side * (y + side * z)) as usize;
+    let mut counts = vec![0u32; (side * side * side) as usize];
     let mut any = false;
     for z in 0..window {
         for y in 0..window {
             for x in 0..window {
-                if let Some(&i) = slot.get(&(window_min + IVec3::new(x, y, z))) {
-                    dense[(x + window * (y + window * z)) as usize] = i;
-                    any = true;
-                }
+                let here = match slot.get(&(window_min + IVec3::new(x, y, z))) {
+                    Some(&i) => {
+                        dense[at(x, y, z)] = WindowPlane::new(&planes[i as usize]);
+                        any = true;
+                        1
+                    }
+                    None => 0,
+                };
+                counts[at_count(x + 1, y + 1, z + 1)] = here
+                    + counts[at_count(x, y + 1, z + 1)]
+                    + counts[at_count(x + 1, y, z + 1)]
+                    + counts[at_count(x + 1, y + 1, z)]
+                    + counts[at_count(x, y, z)]
+                    - counts[at_count(x, y, z + 1)]
+                    - counts[at_count(x, y + 1, z)]
+                    - counts[at_count(x + 1, y, z)];
             }
         }
     }
@@ -78,41 +133,52 @@ fn evaluate_block(
         return None;
     }
     let voxel = config.voxel_size_m;
-    let inv_width_sq = 1.0 / (config.kernel_width_voxels * voxel).powi(2);
+    let width_sq = (config.kernel_width_voxels * voxel).powi(2);
+    let inv_width_sq = 1.0 / width_sq;
+    let reach = 2 * band;
     let mut block = SdfBlock::default();
+    let mut known = false;
     for z in 0..BLOCK_EDGE {
         for y in 0..BLOCK_EDGE {
             for x in 0..BLOCK_EDGE {
+                // Window cells [x, x+reach) × ... hold the voxels within `band` of the corner.
+                let (x1, y1, z1) = (x + reach, y + reach, z + reach);
+                let in_window = counts[at_count(x1, y1, z1)] + counts[at_count(x, y, z1)]
+                    - counts[at_count(x, y1, z1)]
+                    - counts[at_count(x1, y, z1)]
+                    + counts[at_count(x1, y, z)]
+                    + counts[at_count(x, y1, z)]
+                    - counts[at_count(x, y, z)]
+                    - counts[at_count(x1, y1, z)];
+                if in_window == 0 {
+                    continue;
+                }
                 let local = IVec3::new(x, y, z);
                 let corner = origin + (key * BLOCK_EDGE + local).as_vec3() * voxel;
                 let (mut sum, mut weight) = (0.0f32, 0.0f32);
-                // Window coordinates of voxel corner + d, d in [-band, band): local + band + d.
-                for wz in z..z + 2 * band {
-                    for wy in y..y + 2 * band {
-                        for wx in x..x + 2 * band {
-                            let i = dense[(wx + window * (wy + window * wz)) as usize];
-                            if i == u32::MAX {
+                for wz in z..z1 {
+                    for wy in y..y1 {
+                        for wx in x..x1 {
+                            let plane = &dense[at(wx, wy, wz)];
+                            let d_sq = (corner - plane.point).length_squared();
+                            if plane.weight == 0.0 || d_sq >= width_sq {
                                 continue;
                             }
-                            let plane = &planes[i as usize];
-                            // Support squared: a box centred on the surface holds several
-                            // times the points of one centred in the noise fringe beside it,
-                            // and its plane should outvote the fringe's.
-                            let w = plane.points
-                                * plane.points
-                                * (-(corner - plane.point).length_squared() * inv_width_sq).exp();
-                            sum += w * plane.signed_distance(corner);
+                            let falloff = 1.0 - d_sq * inv_width_sq;
+                            let w = plane.weight * falloff * falloff;
+                            sum += w * (plane.normal.dot(corner) - plane.offset_m);
                             weight += w;
                         }
                     }
                 }
-                if weight > 1e-12 {
+                if weight > 0.0 {
                     block.values_m[local_index(local)] = sum / weight;
+                    known = true;
                 }
             }
         }
     }
-    Some(block)
+    known.then_some(block)
 }
 
 /// Samples the smoothed signed distance to `planes` on the corners of a sparse grid near them.

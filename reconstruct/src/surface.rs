@@ -33,7 +33,7 @@ pub struct ReconstructConfig {
     pub min_points: f32,
     /// Grid corners with no plane within this many voxels stay unknown (and the mesh open).
     pub band_voxels: i32,
-    /// Width of the signed distance's Gaussian weight, voxels.
+    /// Radius of the signed distance's weight on nearby planes, voxels.
     pub kernel_width_voxels: f32,
     pub orientation: Orientation,
     /// Connected pieces with fewer faces than this fraction of the largest piece are noise
@@ -48,7 +48,7 @@ impl ReconstructConfig {
             voxel_size_m,
             min_points: 8.0,
             band_voxels: 2,
-            kernel_width_voxels: 1.5,
+            kernel_width_voxels: 2.5,
             orientation: Orientation::Propagate,
             min_piece_fraction: 0.02,
         }
