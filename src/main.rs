@@ -1,1 +1,20 @@
-fn main() {}
+//! The `tacmesh` binary: argument parsing and exit codes; the work lives in the library.
+
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    cli::init_logging(args.verbose);
+    match cli::run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            // One place reports errors: the chain says what failed and why.
+            eprintln!("tacmesh: error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,199 @@
+//! One point cloud to one small mesh: reconstruct (normals → signed distance → marching cubes),
+//! then simplify until the maximum residual would pass its bound.
+//!
+//! Entry point: [`mesh_cloud`].
+
+use std::time::Instant;
+
+use serde::Serialize;
+use tacmesh_reconstruct::surface::{reconstruct_surface, Orientation, ReconstructConfig};
+use tacmesh_simplify::{simplify, SimplifyConfig};
+use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
+
+/// A length given either in metres or as a fraction of the object's extent (the largest side
+/// of the cloud's bounding box), so one default fits a mug and a table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Length {
+    Metres(f32),
+    OfExtent(f32),
+}
+
+impl Length {
+    pub fn resolve_m(self, extent_m: f32) -> f32 {
+        match self {
+            Length::Metres(m) => m,
+            Length::OfExtent(f) => f * extent_m,
+        }
+    }
+}
+
+/// Settings of the whole cloud-to-mesh pipeline. [`MeshConfig::default`] is what `tacmesh mesh`
+/// uses and what `BENCHMARKS.md` measures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshConfig {
+    /// Marching-cubes cell edge.
+    pub voxel_size: Length,
+    /// The simplifier's stop rule: no input-mesh vertex may end farther than this from the
+    /// output surface.
+    pub max_residual: Length,
+    /// Where the sensor was, when known (one-view scans); otherwise normals are oriented by
+    /// propagation.
+    pub viewpoint: Option<Vec3>,
+}
+
+impl Default for MeshConfig {
+    fn default() -> Self {
+        Self {
+            voxel_size: Length::OfExtent(DEFAULT_VOXEL_OF_EXTENT),
+            max_residual: Length::OfExtent(DEFAULT_RESIDUAL_OF_EXTENT),
+            viewpoint: None,
+        }
+    }
+}
+
+/// Default marching-cubes cell: 1/50 of the object's extent (2 cm for the paper's 1 m shapes).
+pub const DEFAULT_VOXEL_OF_EXTENT: f32 = 0.02;
+/// Default residual bound: 2 % of the object's extent (20 mm for a 1 m object).
+pub const DEFAULT_RESIDUAL_OF_EXTENT: f32 = 0.02;
+
+/// What the pipeline did, stage by stage; serialised as `tacmesh mesh --json`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct MeshReport {
+    pub points: usize,
+    pub extent_m: f32,
+    pub voxel_size_m: f32,
+    pub max_residual_bound_m: f32,
+    pub recon_faces: usize,
+    pub faces: usize,
+    pub vertices: usize,
+    /// The residual the output actually reached (≤ the bound), metres.
+    pub max_residual: f32,
+    pub integrate_ms: f64,
+    pub normals_ms: f64,
+    pub orient_ms: f64,
+    pub distance_ms: f64,
+    pub marching_cubes_ms: f64,
+    pub simplify_ms: f64,
+    pub total_ms: f64,
+}
+
+/// Why a cloud could not be meshed.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("the cloud has no finite points to mesh")]
+    EmptyCloud,
+    #[error(transparent)]
+    Reconstruct(#[from] tacmesh_reconstruct::ReconstructError),
+    #[error(transparent)]
+    Simplify(#[from] tacmesh_simplify::SimplifyError),
+}
+
+/// The object's size for relative lengths: the largest side of the box between the 2nd and
+/// 98th percentile of the points on each axis, so that a few noisy outliers do not inflate it
+/// (with the paper's 20 mm noise the full bounding box of a 1 m cube is ~1.15 m).
+pub fn robust_extent_m(points: &[Vec3]) -> Option<f32> {
+    if points.is_empty() {
+        return None;
+    }
+    let mut extent = 0.0f32;
+    let mut values = Vec::with_capacity(points.len());
+    for axis in 0..3 {
+        values.clear();
+        values.extend(points.iter().map(|p| p[axis]));
+        let last = values.len() - 1;
+        let lo_rank = last * 2 / 100;
+        let hi_rank = last - lo_rank;
+        let lo = *values.select_nth_unstable_by(lo_rank, f32::total_cmp).1;
+        let hi = *values.select_nth_unstable_by(hi_rank, f32::total_cmp).1;
+        extent = extent.max(hi - lo);
+    }
+    Some(extent)
+}
+
+/// Meshes one cloud with `config`; returns the simplified mesh and a report.
+pub fn mesh_cloud(
+    cloud: &PointCloud,
+    config: &MeshConfig,
+) -> Result<(TriMesh, MeshReport), PipelineError> {
+    mesh_cloud_with_dense(cloud, config).map(|(_dense, mesh, report)| (mesh, report))
+}
+
+/// As [`mesh_cloud`], also returning the dense marching-cubes mesh before simplification
+/// (benchmarks compare simplifiers on it).
+pub fn mesh_cloud_with_dense(
+    cloud: &PointCloud,
+    config: &MeshConfig,
+) -> Result<(TriMesh, TriMesh, MeshReport), PipelineError> {
+    let start = Instant::now();
+    let finite = PointCloud::new(
+        cloud
+            .points
+            .iter()
+            .copied()
+            .filter(|p| p.is_finite())
+            .collect(),
+    );
+    let extent_m = robust_extent_m(&finite.points).ok_or(PipelineError::EmptyCloud)?;
+    let voxel_size_m = config.voxel_size.resolve_m(extent_m);
+    let max_residual_m = config.max_residual.resolve_m(extent_m);
+
+    let recon_config = ReconstructConfig {
+        orientation: match config.viewpoint {
+            Some(v) => Orientation::TowardsViewpoint(v),
+            None => Orientation::Propagate,
+        },
+        ..ReconstructConfig::with_voxel_size(voxel_size_m)
+    };
+    let (dense, recon) = reconstruct_surface(&finite, &recon_config)?;
+
+    let simplify_start = Instant::now();
+    let (mesh, simplified) = simplify(
+        &dense,
+        &SimplifyConfig {
+            max_residual_m,
+            ..SimplifyConfig::default()
+        },
+    )?;
+    let simplify_ms = simplify_start.elapsed().as_secs_f64() * 1e3;
+
+    let report = MeshReport {
+        points: recon.points,
+        extent_m,
+        voxel_size_m,
+        max_residual_bound_m: max_residual_m,
+        recon_faces: recon.faces,
+        faces: simplified.faces_out,
+        vertices: simplified.vertices_out,
+        max_residual: simplified.max_residual_m,
+        integrate_ms: recon.integrate_ms,
+        normals_ms: recon.normals_ms,
+        orient_ms: recon.orient_ms,
+        distance_ms: recon.distance_ms,
+        marching_cubes_ms: recon.marching_cubes_ms,
+        simplify_ms,
+        total_ms: start.elapsed().as_secs_f64() * 1e3,
+    };
+    tracing::debug!(?report, "meshed cloud");
+    Ok((dense, mesh, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robust_extent_ignores_a_far_outlier() {
+        let mut points: Vec<Vec3> = (0..1000)
+            .map(|i| Vec3::new(i as f32 / 999.0, 0.0, 0.0))
+            .collect();
+        points.push(Vec3::new(50.0, 0.0, 0.0));
+        let extent = robust_extent_m(&points).unwrap();
+        assert!((0.9..1.0).contains(&extent), "{extent}");
+    }
+
+    #[test]
+    fn empty_cloud_is_an_error() {
+        let err = mesh_cloud(&PointCloud::default(), &MeshConfig::default()).unwrap_err();
+        assert!(matches!(err, PipelineError::EmptyCloud));
+    }
+}

@@ -1,0 +1,6 @@
+//! tacmesh's integration tests: one binary, driving the real `tacmesh` executable.
+
+mod util;
+
+mod cli_errors;
+mod offline_pipeline;
