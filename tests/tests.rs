@@ -4,3 +4,4 @@ mod util;
 
 mod cli_errors;
 mod offline_pipeline;
+mod real_scans;

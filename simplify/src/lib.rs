@@ -51,14 +51,19 @@
 //!   points with reassignment of points to faces, spring energy).
 //! - T. K. Dey, H. Edelsbrunner, S. Guha, D. V. Nekhayev, "Topology Preserving Edge Contraction",
 //!   Publ. Inst. Math. (Beograd) 66, 1999 (link condition).
+//! - After simplification, [`fit_to_samples`] moves the few remaining vertices onto the raw
+//!   data (Hoppe 1993's continuous step), which restores the sharp corners and flat faces that
+//!   marching cubes rounded.
 //! - C. Ericson, *Real-Time Collision Detection*, 2004, §5.1.5 (point-to-triangle distance).
 
 mod edge_collapse;
+mod fit_to_samples;
 mod min_heap;
 mod point_triangle;
 mod quadric;
 
 pub use edge_collapse::simplify;
+pub use fit_to_samples::{fit_to_samples, FitConfig, FitReport, WeightedSample};
 
 use glam::Vec3;
 

@@ -20,7 +20,7 @@ pub struct MeshArgs {
     /// Marching-cubes voxel edge in metres [default: 1/50 of the cloud's largest side]
     #[arg(long)]
     voxel_m: Option<f32>,
-    /// Residual bound in metres: how far simplification may move the surface [default: 2 % of
+    /// Residual bound in metres: how far simplification may move the surface [default: 2.5 % of
     /// the cloud's largest side]
     #[arg(long)]
     max_residual_m: Option<f32>,

@@ -1,0 +1,366 @@
+//! Vertex positions fitted to the data after simplification (the continuous step of Hoppe et
+//! al., "Mesh Optimization", SIGGRAPH 1993: with connectivity fixed, minimise the squared
+//! distances from the data points to the mesh plus a small spring term).
+//!
+//! Why: marching cubes over a smoothed distance rounds every sharp edge and corner by about the
+//! smoothing radius, and the simplifier, held to that rounded surface by its residual bound,
+//! keeps corner vertices pulled inwards; a large flat triangle hanging from such a corner is
+//! tilted over its whole area. Fitting the few output vertices to the raw data (as weighted
+//! voxel centroids) puts each flat face where its thousands of points say and each corner where
+//! its faces' planes meet.
+//!
+//! Stages, in the order they run, repeated `iterations` times:
+//! 1. assign: each sample to its nearest output triangle (exact point-to-triangle distance),
+//!    samples farther than `reject_m` ignored (outliers, neighbouring objects);
+//! 2. solve: Gauss–Seidel over vertices, each vertex's 3×3 least-squares system of the point-
+//!    to-plane residuals of its samples, regularised towards its position before the fit;
+//! 3. guard: a move that would flip or degenerate an incident triangle, or carry the vertex
+//!    farther than `max_move_m` from where simplification left it, is cut back.
+//!
+//! Entry point: [`fit_to_samples`].
+
+use glam::{DMat3, DVec3, Vec3};
+use rayon::prelude::*;
+use tacmesh_source::TriMesh;
+
+use crate::point_triangle::TriangleQuery;
+
+/// A data point with a weight (for a voxel centroid: the number of points it stands for).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeightedSample {
+    pub point: Vec3,
+    pub weight: f32,
+}
+
+/// Settings of the fit, metres where they are lengths.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitConfig {
+    pub iterations: usize,
+    /// No vertex moves farther than this from its simplified position.
+    pub max_move_m: f32,
+    /// Samples farther than this from the mesh are not data for it.
+    pub reject_m: f32,
+    /// Spring towards the simplified position, relative to a vertex's data weight.
+    pub stiffness: f32,
+}
+
+/// What the fit did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitReport {
+    pub samples_used: usize,
+    /// Weighted RMS point-to-mesh distance of the used samples before and after, metres.
+    pub rms_before_m: f32,
+    pub rms_after_m: f32,
+    /// The largest distance a vertex moved, metres.
+    pub max_move_m: f32,
+}
+
+struct Assignment {
+    triangle: u32,
+    /// Barycentric weights of the nearest point on the triangle, corners 0, 1, 2.
+    weights: [f32; 3],
+    distance_sq_m2: f32,
+}
+
+/// Triangles bucketed in a uniform grid of `cell_m` cubes, each triangle in every cell its
+/// bounding box grown by `cell_m` touches; a point's cell then lists every triangle within
+/// `cell_m` of it. The output mesh is small (tens to hundreds of triangles), so a flat grid is
+/// all the acceleration the nearest-triangle search needs.
+struct TriangleGrid {
+    cell_m: f32,
+    cells: rustc_hash::FxHashMap<glam::IVec3, Vec<u32>>,
+}
+
+impl TriangleGrid {
+    fn new(mesh: &TriMesh, cell_m: f32) -> Self {
+        let mut cells: rustc_hash::FxHashMap<glam::IVec3, Vec<u32>> = Default::default();
+        for t in 0..mesh.triangles.len() {
+            let [a, b, c] = mesh.corners(t);
+            let lo = ((a.min(b).min(c) - cell_m) / cell_m).floor().as_ivec3();
+            let hi = ((a.max(b).max(c) + cell_m) / cell_m).floor().as_ivec3();
+            for z in lo.z..=hi.z {
+                for y in lo.y..=hi.y {
+                    for x in lo.x..=hi.x {
+                        cells
+                            .entry(glam::IVec3::new(x, y, z))
+                            .or_default()
+                            .push(t as u32);
+                    }
+                }
+            }
+        }
+        Self { cell_m, cells }
+    }
+
+    fn near(&self, p: Vec3) -> &[u32] {
+        let cell = (p / self.cell_m).floor().as_ivec3();
+        self.cells.get(&cell).map_or(&[], |v| v.as_slice())
+    }
+}
+
+fn assign(mesh: &TriMesh, samples: &[WeightedSample], reject_m: f32) -> Vec<Option<Assignment>> {
+    let queries: Vec<TriangleQuery> = (0..mesh.triangles.len())
+        .map(|t| {
+            let [a, b, c] = mesh.corners(t);
+            TriangleQuery::new(a, b, c)
+        })
+        .collect();
+    let grid = TriangleGrid::new(mesh, reject_m);
+    let reject_sq = reject_m * reject_m;
+    samples
+        .par_iter()
+        .map(|s| {
+            let mut best: Option<Assignment> = None;
+            for &t in grid.near(s.point) {
+                let (d_sq, [beta, gamma]) = queries[t as usize].closest(s.point);
+                if d_sq < best.as_ref().map_or(reject_sq, |b| b.distance_sq_m2) {
+                    best = Some(Assignment {
+                        triangle: t,
+                        weights: [1.0 - beta - gamma, beta, gamma],
+                        distance_sq_m2: d_sq,
+                    });
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+fn weighted_rms(samples: &[WeightedSample], assignments: &[Option<Assignment>]) -> (f32, usize) {
+    let (mut sum, mut weight, mut used) = (0.0f64, 0.0f64, 0usize);
+    for (s, a) in samples.iter().zip(assignments) {
+        if let Some(a) = a {
+            sum += f64::from(s.weight) * f64::from(a.distance_sq_m2);
+            weight += f64::from(s.weight);
+            used += 1;
+        }
+    }
+    let rms = if weight > 0.0 {
+        (sum / weight).sqrt() as f32
+    } else {
+        0.0
+    };
+    (rms, used)
+}
+
+fn unit_normal(mesh: &TriMesh, t: usize) -> Vec3 {
+    let [a, b, c] = mesh.corners(t);
+    (b - a).cross(c - a).normalize_or_zero()
+}
+
+/// Whether moving vertex `v` keeps every incident triangle facing within 60° of before and
+/// with area.
+fn move_keeps_triangles(mesh: &TriMesh, incident: &[u32], v: usize, to: Vec3) -> bool {
+    incident.iter().all(|&t| {
+        let tri = mesh.triangles[t as usize];
+        let before = unit_normal(mesh, t as usize);
+        let corner = |i: u32| {
+            if i as usize == v {
+                to
+            } else {
+                mesh.vertices[i as usize]
+            }
+        };
+        let (a, b, c) = (corner(tri[0]), corner(tri[1]), corner(tri[2]));
+        let cross = (b - a).cross(c - a);
+        let scale = (b - a).length_squared().max((c - a).length_squared());
+        cross.length_squared() > 1e-10 * scale * scale && cross.normalize().dot(before) > 0.5
+    })
+}
+
+/// Moves the vertices of `mesh` (not its boundary vertices) to fit `samples`; see the module
+/// docs. Connectivity is unchanged.
+pub fn fit_to_samples(
+    mesh: &mut TriMesh,
+    samples: &[WeightedSample],
+    config: &FitConfig,
+) -> FitReport {
+    let n = mesh.vertices.len();
+    let mut report = FitReport::default();
+    if mesh.triangles.is_empty() || samples.is_empty() || mesh.first_bad_index().is_some() {
+        return report;
+    }
+    let mut incident: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut edge_uses = std::collections::HashMap::new();
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            incident[tri[k] as usize].push(t as u32);
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            *edge_uses.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
+        }
+    }
+    let mut on_boundary = vec![false; n];
+    for (&(a, b), &uses) in &edge_uses {
+        if uses == 1 {
+            on_boundary[a as usize] = true;
+            on_boundary[b as usize] = true;
+        }
+    }
+    let start = mesh.vertices.clone();
+
+    for iteration in 0..config.iterations {
+        let assignments = assign(mesh, samples, config.reject_m);
+        let (rms, used) = weighted_rms(samples, &assignments);
+        if iteration == 0 {
+            report.rms_before_m = rms;
+            report.samples_used = used;
+        }
+        // Per triangle, the samples on it, so a vertex reads only its own triangles' samples.
+        let mut on_triangle: Vec<Vec<u32>> = vec![Vec::new(); mesh.triangles.len()];
+        for (i, a) in assignments.iter().enumerate() {
+            if let Some(a) = a {
+                on_triangle[a.triangle as usize].push(i as u32);
+            }
+        }
+        let normals: Vec<DVec3> = (0..mesh.triangles.len())
+            .map(|t| unit_normal(mesh, t).as_dvec3())
+            .collect();
+        for v in 0..n {
+            if on_boundary[v] || incident[v].is_empty() {
+                continue;
+            }
+            let mut system = DMat3::ZERO;
+            let mut rhs = DVec3::ZERO;
+            let mut data_weight = 0.0f64;
+            for &t in &incident[v] {
+                let tri = mesh.triangles[t as usize];
+                let normal = normals[t as usize];
+                let k = tri.iter().position(|&i| i as usize == v).unwrap_or(0);
+                for &s in &on_triangle[t as usize] {
+                    let Some(a) = &assignments[s as usize] else {
+                        continue;
+                    };
+                    let bk = f64::from(a.weights[k]);
+                    if bk <= 0.0 {
+                        continue;
+                    }
+                    let w = f64::from(samples[s as usize].weight);
+                    // Residual n·(Σ_j b_j v_j − p): solve for v_k with the others held.
+                    let others: f64 = (0..3)
+                        .filter(|&j| j != k)
+                        .map(|j| {
+                            f64::from(a.weights[j])
+                                * normal.dot(mesh.vertices[tri[j] as usize].as_dvec3())
+                        })
+                        .sum();
+                    let target = normal.dot(samples[s as usize].point.as_dvec3()) - others;
+                    system +=
+                        DMat3::from_cols(normal * normal.x, normal * normal.y, normal * normal.z)
+                            * (w * bk * bk);
+                    rhs += normal * (w * bk * target);
+                    data_weight += w * bk * bk;
+                }
+            }
+            if data_weight <= 0.0 {
+                continue;
+            }
+            let spring = f64::from(config.stiffness) * data_weight;
+            let anchor = start[v].as_dvec3();
+            system += DMat3::from_diagonal(DVec3::splat(spring));
+            rhs += anchor * spring;
+            if system.determinant().abs() < 1e-300 {
+                continue;
+            }
+            let mut to = (system.inverse() * rhs).as_vec3();
+            let moved = to - start[v];
+            if moved.length() > config.max_move_m {
+                to = start[v] + moved.normalize_or_zero() * config.max_move_m;
+            }
+            if to.is_finite() && move_keeps_triangles(mesh, &incident[v], v, to) {
+                mesh.vertices[v] = to;
+            }
+        }
+    }
+    let assignments = assign(mesh, samples, config.reject_m);
+    report.rms_after_m = weighted_rms(samples, &assignments).0;
+    report.max_move_m = mesh
+        .vertices
+        .iter()
+        .zip(&start)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f32::max);
+    report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An octahedron whose vertices sit 10% inside the unit octahedron's, and samples on the
+    /// unit octahedron's faces: the fit should push the vertices out to the data.
+    #[test]
+    fn fit_moves_shrunken_octahedron_onto_its_samples() {
+        let axes = [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ];
+        let triangles = vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ];
+        let truth = TriMesh::new(axes.to_vec(), triangles.clone());
+        let mut mesh = TriMesh::new(axes.iter().map(|&a| a * 0.9).collect(), triangles);
+        let mut samples = Vec::new();
+        for t in 0..truth.triangles.len() {
+            let [a, b, c] = truth.corners(t);
+            for i in 1..10 {
+                for j in 1..(10 - i) {
+                    let (u, v) = (i as f32 / 10.0, j as f32 / 10.0);
+                    samples.push(WeightedSample {
+                        point: a + (b - a) * u + (c - a) * v,
+                        weight: 1.0,
+                    });
+                }
+            }
+        }
+        let report = fit_to_samples(
+            &mut mesh,
+            &samples,
+            &FitConfig {
+                iterations: 8,
+                max_move_m: 0.5,
+                reject_m: 1.0,
+                stiffness: 1e-3,
+            },
+        );
+        assert!(report.rms_after_m < 0.2 * report.rms_before_m, "{report:?}");
+        for (v, truth) in mesh.vertices.iter().zip(&truth.vertices) {
+            assert!(v.distance(*truth) < 0.02, "{v} should be near {truth}");
+        }
+    }
+
+    #[test]
+    fn fit_never_moves_a_vertex_past_the_limit() {
+        let mut mesh = TriMesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(0.3, 0.3, 0.0)],
+            vec![[0, 1, 3], [1, 2, 3], [2, 0, 3]],
+        );
+        let samples = [WeightedSample {
+            point: Vec3::new(0.3, 0.3, 1.0),
+            weight: 100.0,
+        }];
+        let report = fit_to_samples(
+            &mut mesh,
+            &samples,
+            &FitConfig {
+                iterations: 3,
+                max_move_m: 0.05,
+                reject_m: 2.0,
+                stiffness: 1e-3,
+            },
+        );
+        assert!(report.max_move_m <= 0.05 + 1e-6, "{report:?}");
+        // The outer vertices are on the boundary and stay.
+        assert_eq!(mesh.vertices[0], Vec3::ZERO);
+    }
+}
