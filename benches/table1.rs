@@ -74,11 +74,13 @@ struct MeshReportJson {
     recon_faces: usize,
     faces: usize,
     max_residual: f32,
+    integrate_ms: f64,
     normals_ms: f64,
     orient_ms: f64,
     distance_ms: f64,
     marching_cubes_ms: f64,
     simplify_ms: f64,
+    fit_ms: f64,
     total_ms: f64,
 }
 
@@ -88,11 +90,13 @@ impl From<&MeshReport> for MeshReportJson {
             recon_faces: r.recon_faces,
             faces: r.faces,
             max_residual: r.max_residual,
+            integrate_ms: r.integrate_ms,
             normals_ms: r.normals_ms,
             orient_ms: r.orient_ms,
             distance_ms: r.distance_ms,
             marching_cubes_ms: r.marching_cubes_ms,
             simplify_ms: r.simplify_ms,
+            fit_ms: r.fit_ms,
             total_ms: r.total_ms,
         }
     }
@@ -256,31 +260,34 @@ fn main() {
         "\n### Speed at {speed_noise} mm noise: median milliseconds per stage ({} threads) and whole pipeline on one thread\n",
         rayon::current_num_threads()
     );
-    println!("| shape | normals | orient | signed distance | marching cubes | simplify | **total** | total, 1 thread |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| shape | integrate | normals | orient | signed distance | marching cubes | simplify | fit | **total** | total, 1 thread |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (shape, ..) in PAPER_TABLE1 {
         let rs = of(shape, speed_noise);
         let m = |f: &dyn Fn(&Run) -> f64| median(rs.iter().map(|r| f(r)).collect());
         println!(
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {:.1} |",
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{:.1}** | {:.1} |",
             shape.name(),
+            m(&|r| r.report.integrate_ms),
             m(&|r| r.report.normals_ms),
             m(&|r| r.report.orient_ms),
             m(&|r| r.report.distance_ms),
             m(&|r| r.report.marching_cubes_ms),
             m(&|r| r.report.simplify_ms),
+            m(&|r| r.report.fit_ms),
             m(&|r| r.report.total_ms),
             m(&|r| r.single_thread_ms),
         );
     }
 
-    println!("\n### Simplifier against meshoptimizer on the same marching-cubes mesh ({speed_noise} mm, seed 1, same face count)\n");
-    println!("| shape | faces | ours ms | meshopt ms | time ratio ours/meshopt | ours MHE (m) | meshopt MHE (m) | MHE ratio ours/meshopt |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("\n### Simplifier against meshoptimizer on the same marching-cubes mesh ({speed_noise} mm, seed 1, same face count, no fit)\n");
+    println!("| shape | faces | ours ms | meshopt ms | time ratio ours/meshopt | ours MHE (m) | meshopt MHE (m) | MHE ratio ours/meshopt | ours + fit MHE (m) |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for (shape, ..) in PAPER_TABLE1 {
         let cloud = cloud_for(shape, speed_noise, 1, options.points);
         let config = MeshConfig::default();
-        let (dense, _, report) = mesh_cloud_with_dense(&cloud, &config).expect("pipeline runs");
+        let (dense, fitted, report) =
+            mesh_cloud_with_dense(&cloud, &config).expect("pipeline runs");
         let simplify_config = SimplifyConfig {
             max_residual_m: report.max_residual_bound_m,
             ..SimplifyConfig::default()
@@ -305,8 +312,11 @@ fn main() {
         let theirs_mhe = mesh_distance(&truth, &theirs, PAPER_SAMPLES, 1)
             .expect("compare")
             .mhe_m;
+        let fitted_mhe = mesh_distance(&truth, &fitted, PAPER_SAMPLES, 1)
+            .expect("compare")
+            .mhe_m;
         println!(
-            "| {} | {} vs {} | {ours_ms:.1} | {theirs_ms:.1} | {:.2} | {ours_mhe:.5} | {theirs_mhe:.5} | {:.2} |",
+            "| {} | {} vs {} | {ours_ms:.1} | {theirs_ms:.1} | {:.2} | {ours_mhe:.5} | {theirs_mhe:.5} | {:.2} | {fitted_mhe:.5} |",
             shape.name(),
             ours.triangles.len(),
             theirs.triangles.len(),
