@@ -6,8 +6,7 @@
 use std::time::Instant;
 
 use serde::Serialize;
-use tacmesh_reconstruct::moment_grid::MomentGrid;
-use tacmesh_reconstruct::surface::{mesh_moment_grid, Orientation, ReconstructConfig};
+use tacmesh_reconstruct::surface::{reconstruct_surface, Orientation, ReconstructConfig};
 use tacmesh_simplify::{fit_to_samples, simplify, FitConfig, SimplifyConfig, WeightedSample};
 use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
 
@@ -155,11 +154,7 @@ pub fn mesh_cloud_with_dense(
         },
         ..ReconstructConfig::with_voxel_size(voxel_size_m)
     };
-    let integrate_start = Instant::now();
-    let mut grid = MomentGrid::new(voxel_size_m);
-    let points = grid.integrate(&finite.points);
-    let integrate_ms = integrate_start.elapsed().as_secs_f64() * 1e3;
-    let (dense, recon) = mesh_moment_grid(&grid, &recon_config)?;
+    let (dense, grid, recon) = reconstruct_surface(&finite, &recon_config)?;
 
     let simplify_start = Instant::now();
     let (mut mesh, simplified) = simplify(
@@ -203,7 +198,7 @@ pub fn mesh_cloud_with_dense(
     let fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
 
     let report = MeshReport {
-        points,
+        points: recon.points,
         extent_m,
         voxel_size_m,
         max_residual_bound_m: max_residual_m,
@@ -211,7 +206,7 @@ pub fn mesh_cloud_with_dense(
         faces: simplified.faces_out,
         vertices: simplified.vertices_out,
         max_residual: simplified.max_residual_m,
-        integrate_ms,
+        integrate_ms: recon.integrate_ms,
         normals_ms: recon.normals_ms,
         orient_ms: recon.orient_ms,
         distance_ms: recon.distance_ms,

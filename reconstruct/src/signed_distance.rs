@@ -14,7 +14,7 @@
 
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 use crate::cell_planes::CellPlane;
 use crate::sparse_sdf::{local_index, SdfBlock, SparseSdf, BLOCK_EDGE};
@@ -30,25 +30,28 @@ pub struct SignedDistanceConfig {
     pub kernel_width_voxels: f32,
 }
 
-/// Corner `x` reads the voxels `x + [-band, band)` on each axis: those whose cube lies within
-/// `band` voxels of it.
-fn blocks_near_planes(planes: &[CellPlane], band: i32) -> Vec<IVec3> {
-    let mut blocks = FxHashSet::default();
-    for plane in planes {
-        // Corners that read this voxel: cell + (-band, band] on each axis.
-        let lo = SparseSdf::split(plane.cell - IVec3::splat(band - 1)).0;
-        let hi = SparseSdf::split(plane.cell + IVec3::splat(band)).0;
+/// For every block, the planes in its window: the voxels `block · 8 + [−band, 8 + band)` on each
+/// axis, which holds every voxel within `band` of the block's corners. Built by walking the
+/// planes once (each lands in one to eight windows) rather than looking up every window voxel.
+fn planes_by_window(planes: &[CellPlane], band: i32) -> Vec<(IVec3, Vec<u32>)> {
+    let mut windows: FxHashMap<IVec3, Vec<u32>> = FxHashMap::default();
+    for (i, plane) in planes.iter().enumerate() {
+        let lo = (plane.cell - IVec3::splat(band)).div_euclid(IVec3::splat(BLOCK_EDGE));
+        let hi = (plane.cell + IVec3::splat(band)).div_euclid(IVec3::splat(BLOCK_EDGE));
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
-                    blocks.insert(IVec3::new(x, y, z));
+                    windows
+                        .entry(IVec3::new(x, y, z))
+                        .or_default()
+                        .push(i as u32);
                 }
             }
         }
     }
-    let mut blocks: Vec<IVec3> = blocks.into_iter().collect();
-    blocks.sort_unstable_by_key(|k| (k.z, k.y, k.x));
-    blocks
+    let mut windows: Vec<(IVec3, Vec<u32>)> = windows.into_iter().collect();
+    windows.sort_unstable_by_key(|(k, _)| (k.z, k.y, k.x));
+    windows
 }
 
 /// A plane as the corner loop reads it; `weight == 0` marks a voxel with none.
@@ -91,7 +94,7 @@ impl WindowPlane {
 fn evaluate_block(
     key: IVec3,
     planes: &[CellPlane],
-    slot: &FxHashMap<IVec3, u32>,
+    in_window: &[u32],
     config: &SignedDistanceConfig,
     origin: Vec3,
 ) -> Option<SdfBlock> {
@@ -106,18 +109,17 @@ fn evaluate_block(
     let side = window + 1;
     let at_count = |x: i32, y: i32, z: i32| (x + side * (y + side * z)) as usize;
     let mut counts = vec![0u32; (side * side * side) as usize];
+    for &i in in_window {
+        let plane = &planes[i as usize];
+        let w = plane.cell - window_min;
+        dense[at(w.x, w.y, w.z)] = WindowPlane::new(plane);
+    }
     let mut any = false;
     for z in 0..window {
         for y in 0..window {
             for x in 0..window {
-                let here = match slot.get(&(window_min + IVec3::new(x, y, z))) {
-                    Some(&i) => {
-                        dense[at(x, y, z)] = WindowPlane::new(&planes[i as usize]);
-                        any = true;
-                        1
-                    }
-                    None => 0,
-                };
+                let here = u32::from(dense[at(x, y, z)].weight > 0.0);
+                any |= here > 0;
                 counts[at_count(x + 1, y + 1, z + 1)] = here
                     + counts[at_count(x, y + 1, z + 1)]
                     + counts[at_count(x + 1, y, z + 1)]
@@ -186,15 +188,15 @@ fn evaluate_block(
 pub fn signed_distance_near(planes: &[CellPlane], config: &SignedDistanceConfig) -> SparseSdf {
     let origin = Vec3::ZERO;
     let mut sdf = SparseSdf::new(config.voxel_size_m, origin);
-    let slot: FxHashMap<IVec3, u32> = planes
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (p.cell, i as u32))
-        .collect();
-    let keys = blocks_near_planes(planes, config.band_voxels.max(1));
-    let blocks: Vec<(IVec3, SdfBlock)> = keys
+    let windows = planes_by_window(planes, config.band_voxels.max(1));
+    let blocks: Vec<(IVec3, SdfBlock)> = windows
         .par_iter()
-        .filter_map(|&key| Some((key, evaluate_block(key, planes, &slot, config, origin)?)))
+        .filter_map(|(key, in_window)| {
+            Some((
+                *key,
+                evaluate_block(*key, planes, in_window, config, origin)?,
+            ))
+        })
         .collect();
     sdf.blocks.extend(blocks);
     sdf

@@ -131,11 +131,12 @@ pub fn drop_small_pieces(mesh: &mut TriMesh, min_fraction: f32) -> usize {
     pieces_before - pieces_after
 }
 
-/// Reconstructs the surface of `cloud` as a marching-cubes mesh (dense; simplify it next).
+/// Reconstructs the surface of `cloud` as a marching-cubes mesh (dense; simplify it next), and
+/// returns the fused moment grid with it (later stages fit to it).
 pub fn reconstruct_surface(
     cloud: &PointCloud,
     config: &ReconstructConfig,
-) -> Result<(TriMesh, ReconstructReport), ReconstructError> {
+) -> Result<(TriMesh, MomentGrid, ReconstructReport), ReconstructError> {
     if !(config.voxel_size_m.is_finite() && config.voxel_size_m > 0.0) {
         return Err(ReconstructError::BadVoxelSize {
             voxel_size_m: config.voxel_size_m,
@@ -148,7 +149,7 @@ pub fn reconstruct_surface(
     let (mesh, mut report) = mesh_moment_grid(&grid, config)?;
     report.points = points;
     report.integrate_ms = integrate_ms;
-    Ok((mesh, report))
+    Ok((mesh, grid, report))
 }
 
 /// Meshes a fused moment grid (its voxel size wins over `config.voxel_size_m`).
