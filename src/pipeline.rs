@@ -100,16 +100,16 @@ pub enum PipelineError {
 
 /// The object's size for relative lengths: the largest side of the box between the 2nd and
 /// 98th percentile of the points on each axis, so that a few noisy outliers do not inflate it
-/// (with the paper's 20 mm noise the full bounding box of a 1 m cube is ~1.15 m).
+/// (with the paper's 20 mm noise the full bounding box of a 1 m cube is ~1.15 m). Non-finite
+/// points are ignored; `None` when there is no finite point.
 pub fn robust_extent_m(points: &[Vec3]) -> Option<f32> {
-    if points.is_empty() {
-        return None;
-    }
+    let finite = || points.iter().filter(|p| p.is_finite());
+    finite().next()?;
     let mut extent = 0.0f32;
     let mut values = Vec::with_capacity(points.len());
     for axis in 0..3 {
         values.clear();
-        values.extend(points.iter().map(|p| p[axis]));
+        values.extend(finite().map(|p| p[axis]));
         let last = values.len() - 1;
         let lo_rank = last * 2 / 100;
         let hi_rank = last - lo_rank;
@@ -135,15 +135,7 @@ pub fn mesh_cloud_with_dense(
     config: &MeshConfig,
 ) -> Result<(TriMesh, TriMesh, MeshReport), PipelineError> {
     let start = Instant::now();
-    let finite = PointCloud::new(
-        cloud
-            .points
-            .iter()
-            .copied()
-            .filter(|p| p.is_finite())
-            .collect(),
-    );
-    let extent_m = robust_extent_m(&finite.points).ok_or(PipelineError::EmptyCloud)?;
+    let extent_m = robust_extent_m(&cloud.points).ok_or(PipelineError::EmptyCloud)?;
     let voxel_size_m = config.voxel_size.resolve_m(extent_m);
     let max_residual_m = config.max_residual.resolve_m(extent_m);
 
@@ -154,7 +146,8 @@ pub fn mesh_cloud_with_dense(
         },
         ..ReconstructConfig::with_voxel_size(voxel_size_m)
     };
-    let (dense, grid, recon) = reconstruct_surface(&finite, &recon_config)?;
+    // Reconstruction skips non-finite points itself (and counts the rest).
+    let (dense, grid, recon) = reconstruct_surface(cloud, &recon_config)?;
 
     let simplify_start = Instant::now();
     let (mut mesh, simplified) = simplify(
@@ -232,6 +225,7 @@ mod tests {
             .map(|i| Vec3::new(i as f32 / 999.0, 0.0, 0.0))
             .collect();
         points.push(Vec3::new(50.0, 0.0, 0.0));
+        points.push(Vec3::NAN);
         let extent = robust_extent_m(&points).unwrap();
         assert!((0.9..1.0).contains(&extent), "{extent}");
     }
