@@ -1,0 +1,83 @@
+use crate::message::{Sender, MAX_FRAME_BYTES};
+
+/// Everything that can be wrong with a frame, on either side. After any decode error the peer is
+/// not speaking this protocol correctly: drop the connection (see [`crate::FrameDecoder`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum WireError {
+    #[error(
+        "frame length {length} exceeds the cap of {MAX_FRAME_BYTES} bytes: \
+         the peer is not speaking the tacmesh protocol, or the message is too big to send"
+    )]
+    FrameTooLarge { length: u64 },
+
+    #[error("frame length 0: every frame holds at least its message kind byte")]
+    EmptyFrame,
+
+    #[error(
+        "unknown message kind 0x{kind:02x}: the peer speaks a newer protocol version \
+         or is not a tacmesh peer"
+    )]
+    UnknownKind { kind: u8 },
+
+    #[error("{message} is sent by a {sender}, but this decoder reads what a {expected} sends")]
+    WrongSender {
+        message: &'static str,
+        sender: Sender,
+        expected: Sender,
+    },
+
+    #[error(
+        "{message} frame ends inside `{field}`: it needs {needed} more bytes, {available} are left"
+    )]
+    Truncated {
+        message: &'static str,
+        field: &'static str,
+        needed: u64,
+        available: usize,
+    },
+
+    #[error("{message} frame has {extra} bytes after its last field")]
+    TrailingBytes { message: &'static str, extra: usize },
+
+    #[error(
+        "triangle {triangle} uses vertex {index}, but the mesh has only {vertex_count} vertices"
+    )]
+    IndexOutOfRange {
+        triangle: usize,
+        index: u32,
+        vertex_count: usize,
+    },
+
+    #[error(
+        "vertex {vertex} has a non-finite coordinate ({value}): coordinates are finite metres"
+    )]
+    NonFiniteVertex { vertex: usize, value: f32 },
+
+    #[error("`{field}` is {value}, but it must be finite and not negative")]
+    InvalidNumber { field: &'static str, value: f32 },
+
+    #[error("`{field}` of {message} is not UTF-8 (valid up to byte {valid_up_to})")]
+    InvalidUtf8 {
+        message: &'static str,
+        field: &'static str,
+        valid_up_to: usize,
+    },
+
+    #[error("`{field}` of {message} is {len} bytes, more than the cap of {max}")]
+    TextTooLong {
+        message: &'static str,
+        field: &'static str,
+        len: usize,
+        max: usize,
+    },
+
+    #[error(
+        "the server speaks protocol version {theirs}, this client speaks {ours}: \
+         use a client and daemon from the same release"
+    )]
+    VersionMismatch { ours: u16, theirs: u16 },
+
+    #[error("expected Hello as the first message of the connection, got {got}")]
+    NotHello { got: &'static str },
+}
