@@ -30,7 +30,8 @@
 //! again unless it is still the cheapest. A refused edge is parked on both its vertices and queued
 //! again only when a collapse changes the neighbourhood of one of them. Each edge has at most one
 //! queue entry or one parked record at a time; entries of a vertex merged away are dropped when
-//! popped, and its edges to vertices new to the survivor are queued afresh.
+//! popped, or all at once when they outnumber the live edges, and its edges to vertices new to
+//! the survivor are queued afresh.
 
 use glam::{DVec3, Vec3};
 use tacmesh_source::TriMesh;
@@ -176,6 +177,16 @@ impl EdgeQueue {
         })
     }
 
+    fn len(&self) -> usize {
+        self.heap.len()
+    }
+
+    /// Drops the entries for which `keep(a, b)` is false.
+    fn retain(&mut self, mut keep: impl FnMut(u32, u32) -> bool) {
+        self.heap
+            .retain(|&key| keep((key >> 64) as u32, (key >> 32) as u32));
+    }
+
     /// Cost bits of the cheapest queued entry.
     fn peek_cost_bits(&self) -> Option<u32> {
         self.heap.peek().map(|key| (key >> 96) as u32)
@@ -211,12 +222,12 @@ struct Status {
     flags: u8,
 }
 
-/// An input vertex as a support point of the residual.
+/// An input vertex as a support point of the residual: the fields the residual check walks.
+/// Its normal lives apart in `Simplifier::support_normal`, read only by collapses that pass,
+/// so that this array (walked in linked-list order, mostly cache misses) stays small.
 #[derive(Debug, Clone, Copy)]
 struct Support {
     position: Vec3,
-    /// Area-weighted input vertex normal, unit length.
-    normal: Vec3,
     /// Barycentric weights `[wb, wc]`, on the assigned face, of the point that was closest when
     /// last measured: the distance to that point as the face moves bounds the distance to the
     /// face.
@@ -284,6 +295,8 @@ struct Simplifier<'m> {
 
     /// Support points by input vertex id (unused entries have `face == NONE`).
     support: Vec<Support>,
+    /// Per support point: the area-weighted input vertex normal, unit length.
+    support_normal: Vec<Vec3>,
     /// Per face: its first support point (they chain through `Support::next`).
     face_support: Vec<u32>,
     /// Per vertex: a support point that made the last residual check at this vertex fail.
@@ -329,13 +342,13 @@ impl<'m> Simplifier<'m> {
             support: vec![
                 Support {
                     position: Vec3::ZERO,
-                    normal: Vec3::ZERO,
                     weights: [0.0; 2],
                     face: NONE,
                     next: NONE,
                 };
                 n
             ],
+            support_normal: vec![Vec3::ZERO; n],
             face_support: vec![NONE; f],
             fail_hint: vec![NONE; n],
             queue: EdgeQueue::with_capacity(3 * f / 2 + 16),
@@ -504,7 +517,7 @@ impl<'m> Simplifier<'m> {
             let cross = cross_of(p);
             let double_area = cross.length();
             for &v in t {
-                self.support[v as usize].normal += cross;
+                self.support_normal[v as usize] += cross;
                 let best = &mut largest_face[v as usize];
                 if double_area > best.1 {
                     *best = (f as u32, double_area);
@@ -553,7 +566,6 @@ impl<'m> Simplifier<'m> {
                 let corner = self.tris[f as usize].iter().position(|&w| w as usize == v);
                 let support = &mut self.support[v];
                 support.position = self.input[v];
-                support.normal = support.normal.normalize_or_zero();
                 support.weights = match corner {
                     Some(1) => [1.0, 0.0],
                     Some(2) => [0.0, 1.0],
@@ -562,6 +574,7 @@ impl<'m> Simplifier<'m> {
                 support.face = f;
                 support.next = self.face_support[f as usize];
                 self.face_support[f as usize] = v as u32;
+                self.support_normal[v] = self.support_normal[v].normalize_or_zero();
             }
         }
     }
@@ -944,7 +957,7 @@ impl<'m> Simplifier<'m> {
             sc.new_support_normal.clear();
             sc.new_support_normal.resize(sc.new_face.len(), Vec3::ZERO);
             for &(p, slot, _) in &moves {
-                sc.new_support_normal[slot as usize] += self.support[p as usize].normal;
+                sc.new_support_normal[slot as usize] += self.support_normal[p as usize];
             }
             let disagrees = sc
                 .new_support_normal
@@ -1125,6 +1138,19 @@ impl<'m> Simplifier<'m> {
         self.scratch.ring = ring;
     }
 
+    /// Drops the queue entries of merged-away vertices once they outnumber the live edges
+    /// (about `1.5 × faces_alive`). Left in, each would cost a full pop: they were over half
+    /// of all pops. Which entries are dead does not change, so neither does the order in which
+    /// live entries pop; only [`EdgeQueue::peek_cost_bits`] now sees a live cost more often.
+    fn purge_dead_entries(&mut self) {
+        if self.queue.len() <= 2 * self.faces_alive + 64 {
+            return;
+        }
+        let status = &self.status;
+        self.queue
+            .retain(|a, b| status[a as usize].flags & status[b as usize].flags & ALIVE != 0);
+    }
+
     fn run(&mut self) {
         while let Some(entry) = self.queue.pop() {
             if self.faces_alive <= self.min_faces {
@@ -1148,6 +1174,7 @@ impl<'m> Simplifier<'m> {
             match verdict {
                 Verdict::Collapse => {
                     self.collapse(a, b, target);
+                    self.purge_dead_entries();
                     continue;
                 }
                 Verdict::Drop => continue,

@@ -33,6 +33,38 @@ impl<T: Ord + Copy> MinHeap<T> {
         self.items[i] = item;
     }
 
+    pub(crate) fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// Drops every item for which `keep` is false, then restores the heap order bottom-up
+    /// (Floyd's heap construction, linear in the length).
+    pub(crate) fn retain(&mut self, keep: impl FnMut(&T) -> bool) {
+        self.items.retain(keep);
+        let len = self.items.len();
+        for start in (0..len.div_ceil(4)).rev() {
+            let item = self.items[start];
+            let mut i = start;
+            loop {
+                let first = 4 * i + 1;
+                let Some((k, &smallest)) = self
+                    .items
+                    .get(first..len.min(first + 4))
+                    .and_then(|c| c.iter().enumerate().min_by_key(|&(_, x)| *x))
+                else {
+                    break;
+                };
+                if smallest < item {
+                    self.items[i] = smallest;
+                    i = first + k;
+                } else {
+                    break;
+                }
+            }
+            self.items[i] = item;
+        }
+    }
+
     /// The smallest item, without removing it.
     pub(crate) fn peek(&self) -> Option<T> {
         self.items.first().copied()
@@ -100,5 +132,24 @@ mod tests {
             assert_eq!(Some(x), expected.pop());
         }
         assert!(expected.is_empty());
+    }
+
+    #[test]
+    fn retain_keeps_heap_order() {
+        let mut heap = MinHeap::with_capacity(4);
+        let mut state = 7u32;
+        for _ in 0..1000 {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            heap.push(state >> 8);
+        }
+        heap.retain(|x| x % 3 != 0);
+        let mut last = 0;
+        let mut count = 0;
+        while let Some(x) = heap.pop() {
+            assert!(x >= last && x % 3 != 0);
+            last = x;
+            count += 1;
+        }
+        assert!(count > 500 && count < 800, "{count}");
     }
 }
