@@ -18,15 +18,25 @@
 //! whatever the thread count (see `sampling.rs` for the one cross-platform caveat, the
 //! Gaussian noise's rare libm calls).
 
+mod depth_camera;
 mod metric;
 mod sampling;
+mod scene;
 mod shapes;
 
 use glam::Vec3;
 use tacmesh_source::TriMesh;
 
+pub use depth_camera::{
+    look_at, DepthCameraConfig, DepthCameraError, DepthNoise, SimulatedDepthCamera,
+    DEFAULT_INTRINSICS, DEFAULT_VIEW_DISTANCE_M,
+};
 pub use metric::{mesh_distance, point_to_mesh_distances, MeshDistance, PAPER_SAMPLES};
 pub use sampling::{sample_cloud, SampleConfig, SurfaceSampler};
+pub use scene::{
+    RayHit, Scene, SceneBvh, SceneError, SceneObject, TABLETOP_OBJECT_EXTENT_M,
+    TABLETOP_TABLE_SIDE_M,
+};
 pub use shapes::{cone, cube, cylinder, fit_to_extent, torus, uv_sphere, Shape};
 
 /// Why a mesh could not be sampled or measured.

@@ -1,0 +1,872 @@
+//! A simulated depth camera: one ray per pixel through a static [`Scene`], with a real sensor's
+//! noise, as a [`DepthSource`] like any hardware backend.
+//!
+//! Entry points:
+//! - [`SimulatedDepthCamera::new`] (or [`SimulatedDepthCamera::tabletop`]) with a
+//!   [`DepthCameraConfig`]; as a [`DepthSource`] it yields [`Observation::Depth`] frames, paced
+//!   at `rate_fps` of wall-clock time or as fast as they are consumed.
+//! - [`SimulatedDepthCamera::render`]: the frame for a given frame index, without pacing;
+//!   [`SimulatedDepthCamera::render_ids`]: which object each pixel sees (ground truth).
+//! - [`DepthNoise`]: axial Gaussian noise `sigma = k·z²` (Intel RealSense D400 datasheet's
+//!   depth-RMS model; or the paper's constant sigma), dropouts, and flying pixels at depth edges.
+//! - [`look_at`]: a sensor pose from an eye point and a target.
+//!
+//! Pipeline per frame, in this order: cast rays (clean depth, rows in parallel) → flying pixels
+//! (decided on the clean image) → Gaussian noise along the ray → dropouts. Each row draws from
+//! its own ChaCha8 stream keyed by (seed, frame index), so a frame is bit-identical whatever the
+//! thread count.
+//!
+//! Depth is z in the sensor frame (x right, y down, z forward), not ray length; noise is added
+//! to z, which moves the deprojected point along its pixel's ray. Casting the ray
+//! `world_from_sensor.translation + t · world_from_sensor.matrix3 · (x, y, 1)` makes the time
+//! of impact `t` that z exactly, for any affine pose.
+
+use std::thread;
+use std::time::{Duration, Instant};
+
+use glam::{Affine3A, Mat3A, Vec3, Vec3A};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use rayon::prelude::*;
+use tacmesh_source::{DepthFrame, DepthSource, Intrinsics, Observation, SourceError};
+
+use crate::scene::{Scene, SceneBvh, SceneError};
+
+/// The sensor's noise model. All probabilities are per pixel and per frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthNoise {
+    /// `k` of the axial noise `sigma = k·z²`: the standard deviation at 1 m, metres.
+    pub sigma_at_1m_m: f32,
+    /// If set, a depth-independent sigma in metres used instead of `k·z²` (the paper's noise
+    /// is a constant 0.02 m).
+    pub constant_sigma_m: Option<f32>,
+    /// Probability that a pixel reads 0 (no return).
+    pub dropout_probability: f32,
+    /// Probability that a pixel at a depth edge reads a depth between the two surfaces.
+    pub flying_pixel_probability: f32,
+    /// A pixel is at a depth edge when a 4-neighbour's clean depth differs by more than this,
+    /// metres. Neighbours without a hit do not count (there is nothing to interpolate to).
+    pub flying_pixel_edge_m: f32,
+}
+
+impl DepthNoise {
+    /// No noise at all: the clean ray-cast depth.
+    pub const NONE: DepthNoise = DepthNoise {
+        sigma_at_1m_m: 0.0,
+        constant_sigma_m: None,
+        dropout_probability: 0.0,
+        flying_pixel_probability: 0.0,
+        flying_pixel_edge_m: 0.05,
+    };
+
+    /// The standard deviation of the depth noise at depth `z_m`, metres.
+    pub fn sigma_m(&self, z_m: f32) -> f32 {
+        self.constant_sigma_m
+            .unwrap_or(self.sigma_at_1m_m * z_m * z_m)
+    }
+
+    fn check(&self) -> Result<(), DepthCameraError> {
+        let fields = [
+            ("sigma_at_1m_m", self.sigma_at_1m_m, f32::INFINITY),
+            (
+                "constant_sigma_m",
+                self.constant_sigma_m.unwrap_or(0.0),
+                f32::INFINITY,
+            ),
+            ("dropout_probability", self.dropout_probability, 1.0),
+            (
+                "flying_pixel_probability",
+                self.flying_pixel_probability,
+                1.0,
+            ),
+            (
+                "flying_pixel_edge_m",
+                self.flying_pixel_edge_m,
+                f32::INFINITY,
+            ),
+        ];
+        for (field, value, max) in fields {
+            if !(value.is_finite() && (0.0..=max).contains(&value)) {
+                return Err(DepthCameraError::InvalidNoise { field, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for DepthNoise {
+    /// RealSense-like: 1 mm at 1 m (4 mm at 2 m), 1 % dropouts, 30 % flying pixels at edges
+    /// deeper than 5 cm.
+    fn default() -> Self {
+        DepthNoise {
+            sigma_at_1m_m: 0.001,
+            constant_sigma_m: None,
+            dropout_probability: 0.01,
+            flying_pixel_probability: 0.3,
+            flying_pixel_edge_m: 0.05,
+        }
+    }
+}
+
+/// Everything about the simulated camera except the scene.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthCameraConfig {
+    pub intrinsics: Intrinsics,
+    /// The sensor pose (x right, y down, z forward); see [`look_at`].
+    pub world_from_sensor: Affine3A,
+    pub noise: DepthNoise,
+    /// Surfaces at z beyond this read 0, metres.
+    pub max_range_m: f32,
+    /// With the frame index, the seed of every random draw.
+    pub seed: u64,
+    /// Frames per second of wall-clock time to pace at; `None` renders as fast as consumed.
+    pub rate_fps: Option<f32>,
+}
+
+/// 640×480 with the focal length of a Kinect-class sensor (about 63° horizontal field of view).
+pub const DEFAULT_INTRINSICS: Intrinsics = Intrinsics {
+    width: 640,
+    height: 480,
+    fx: 525.0,
+    fy: 525.0,
+    cx: 319.5,
+    cy: 239.5,
+};
+
+/// How far the default camera is from the table centre, metres.
+pub const DEFAULT_VIEW_DISTANCE_M: f32 = 1.2;
+
+impl DepthCameraConfig {
+    /// The default camera pose for [`Scene::tabletop`]: 1.2 m from the table centre, on the
+    /// −Y side, looking down at 45° at the centre.
+    pub fn tabletop_pose() -> Affine3A {
+        let (sin, cos) = std::f32::consts::FRAC_PI_4.sin_cos();
+        let eye = DEFAULT_VIEW_DISTANCE_M * Vec3::new(0.0, -cos, sin);
+        look_at(eye, Vec3::ZERO, Vec3::Z)
+    }
+}
+
+impl Default for DepthCameraConfig {
+    /// [`DEFAULT_INTRINSICS`], [`tabletop_pose`](Self::tabletop_pose), default noise, 4 m
+    /// range, seed 0, 30 fps.
+    fn default() -> Self {
+        DepthCameraConfig {
+            intrinsics: DEFAULT_INTRINSICS,
+            world_from_sensor: Self::tabletop_pose(),
+            noise: DepthNoise::default(),
+            max_range_m: 4.0,
+            seed: 0,
+            rate_fps: Some(30.0),
+        }
+    }
+}
+
+/// Why a simulated camera could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum DepthCameraError {
+    #[error("cannot index the scene")]
+    Scene(#[from] SceneError),
+
+    #[error("noise parameter {field} must be finite and within its range (sigmas >= 0, probabilities in [0, 1]), got {value}")]
+    InvalidNoise { field: &'static str, value: f32 },
+
+    #[error("intrinsics must have a non-zero size and finite, non-zero focal lengths and a finite principal point, got {intrinsics:?}")]
+    InvalidIntrinsics { intrinsics: Intrinsics },
+
+    #[error("max_range_m must be a finite number of metres > 0, got {max_range_m}")]
+    InvalidRange { max_range_m: f32 },
+
+    #[error("rate_fps must be a finite number of frames per second > 0 (or none to run as fast as consumed), got {rate_fps}")]
+    InvalidRate { rate_fps: f32 },
+
+    #[error("world_from_sensor must be finite and invertible, got {world_from_sensor:?}")]
+    InvalidPose { world_from_sensor: Affine3A },
+}
+
+/// The sensor pose at `eye` looking at `target`, with the image's up direction as close to `up`
+/// as possible: sensor z towards the target, x to the right, y down in the image.
+///
+/// `up` must not be parallel to the viewing direction (the result is not finite then).
+pub fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Affine3A {
+    let forward = (target - eye).normalize();
+    let right = forward.cross(up).normalize();
+    let down = forward.cross(right);
+    Affine3A::from_mat3_translation(glam::Mat3::from_cols(right, down, forward), eye)
+}
+
+/// A pinhole depth camera rendering a static scene by ray casting.
+pub struct SimulatedDepthCamera {
+    name: String,
+    config: DepthCameraConfig,
+    bvh: SceneBvh,
+    /// Sensor-frame ray `(x, y, 1)` of every pixel, row-major; computed once.
+    rays_in_sensor: Vec<Vec3A>,
+    start: Instant,
+    frame_index: u64,
+    next_due: Option<Instant>,
+}
+
+impl SimulatedDepthCamera {
+    /// A camera named `name` (e.g. `sim:tabletop`) looking at `scene`. Fails on an unusable
+    /// object mesh or an out-of-range configuration value. The capture clock starts now.
+    pub fn new(
+        name: impl Into<String>,
+        scene: &Scene,
+        config: DepthCameraConfig,
+    ) -> Result<Self, DepthCameraError> {
+        check_config(&config)?;
+        let bvh = scene.build_bvh()?;
+        let k = config.intrinsics;
+        let rays_in_sensor = (0..k.height)
+            .flat_map(|v| (0..k.width).map(move |u| Vec3A::from(k.ray(u as f32, v as f32))))
+            .collect();
+        Ok(SimulatedDepthCamera {
+            name: name.into(),
+            config,
+            bvh,
+            rays_in_sensor,
+            start: Instant::now(),
+            frame_index: 0,
+            next_due: None,
+        })
+    }
+
+    /// [`Scene::tabletop`] seen by the default camera with the given seed.
+    pub fn tabletop(seed: u64) -> Self {
+        let config = DepthCameraConfig {
+            seed,
+            ..DepthCameraConfig::default()
+        };
+        match Self::new("sim:tabletop", &Scene::tabletop(), config) {
+            Ok(camera) => camera,
+            // The built-in scene and defaults are valid; the tests pin this down.
+            Err(err) => unreachable!("the built-in tabletop camera is invalid: {err}"),
+        }
+    }
+
+    /// Measures `capture_time` from `start` instead of from this camera's creation, so that
+    /// several sources share the daemon's clock.
+    pub fn with_clock_start(mut self, start: Instant) -> Self {
+        self.start = start;
+        self
+    }
+
+    pub fn config(&self) -> &DepthCameraConfig {
+        &self.config
+    }
+
+    /// The scene's ray-casting index (for ground-truth queries).
+    pub fn scene_bvh(&self) -> &SceneBvh {
+        &self.bvh
+    }
+
+    /// The index of the frame the next [`next_observation`](DepthSource::next_observation)
+    /// renders (0 for the first).
+    pub fn frame_index(&self) -> u64 {
+        self.frame_index
+    }
+
+    /// The depth image of frame `frame_index`, row-major, metres along the optical axis, 0
+    /// for no reading. Pure: the same camera configuration and frame index give the same
+    /// buffer bit for bit, whatever the thread count.
+    pub fn render_depth(&self, frame_index: u64) -> Vec<f32> {
+        let clean_m = self.cast_rays(|depth_m, _| depth_m);
+        self.add_noise(&clean_m, frame_index)
+    }
+
+    /// Frame `frame_index` as a [`DepthFrame`] stamped with `capture_time`.
+    pub fn render(&self, frame_index: u64, capture_time: Duration) -> DepthFrame {
+        DepthFrame {
+            intrinsics: self.config.intrinsics,
+            depth_m: self.render_depth(frame_index),
+            world_from_sensor: self.config.world_from_sensor,
+            capture_time,
+        }
+    }
+
+    /// Which object each pixel sees (`None`: nothing within range), row-major, without noise.
+    pub fn render_ids(&self) -> Vec<Option<u32>> {
+        self.cast_rays(|_, object_id| object_id)
+    }
+
+    // -- stage 1: cast one ray per pixel ---------------------------------------------------------
+
+    /// One ray per pixel, rows in parallel; `pixel(depth_m, object_id)` makes each output.
+    fn cast_rays<T: Send + Copy + Default>(
+        &self,
+        pixel: impl Fn(f32, Option<u32>) -> T + Sync,
+    ) -> Vec<T> {
+        let origin = Vec3::from(self.config.world_from_sensor.translation);
+        let rotation: Mat3A = self.config.world_from_sensor.matrix3;
+        let max_range_m = self.config.max_range_m;
+        let width = self.config.intrinsics.width as usize;
+        let mut out = vec![T::default(); self.rays_in_sensor.len()];
+        out.par_chunks_mut(width)
+            .zip(self.rays_in_sensor.par_chunks(width))
+            .for_each(|(out_row, rays)| {
+                for (out, &ray) in out_row.iter_mut().zip(rays) {
+                    let dir = Vec3::from(rotation * ray);
+                    *out = match self.bvh.cast_ray(origin, dir, max_range_m) {
+                        Some(hit) => pixel(hit.time_of_impact, Some(hit.object_id)),
+                        None => pixel(0.0, None),
+                    };
+                }
+            });
+        out
+    }
+
+    // -- stages 2–4: flying pixels, Gaussian noise, dropouts ---------------------------------------
+
+    fn add_noise(&self, clean_m: &[f32], frame_index: u64) -> Vec<f32> {
+        let noise = self.config.noise;
+        let width = self.config.intrinsics.width as usize;
+        let height = self.config.intrinsics.height as usize;
+        let key = row_key(self.config.seed, frame_index);
+        let mut noisy_m = vec![0.0f32; clean_m.len()];
+        noisy_m
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(v, out_row)| {
+                let mut rng = ChaCha8Rng::from_seed(key);
+                rng.set_stream(v as u64);
+                for (u, out) in out_row.iter_mut().enumerate() {
+                    let mut z = clean_m[v * width + u];
+                    if z <= 0.0 {
+                        continue;
+                    }
+                    if noise.flying_pixel_probability > 0.0 {
+                        if let Some(far_z) = edge_partner(clean_m, width, height, u, v, &noise) {
+                            if rng.random::<f32>() < noise.flying_pixel_probability {
+                                z += rng.random::<f32>() * (far_z - z);
+                            }
+                        }
+                    }
+                    let sigma_m = noise.sigma_m(z);
+                    if sigma_m > 0.0 {
+                        z += sigma_m * rng.sample::<f32, _>(StandardNormal);
+                    }
+                    if noise.dropout_probability > 0.0
+                        && rng.random::<f32>() < noise.dropout_probability
+                    {
+                        z = 0.0;
+                    }
+                    // Noise cannot put a surface behind the sensor.
+                    *out = z.max(0.0);
+                }
+            });
+        noisy_m
+    }
+
+    /// Sleeps until frame `frame_index` is due at `rate_fps`; a camera that has fallen behind
+    /// does not burst to catch up, it restarts its schedule from now.
+    fn pace(&mut self) {
+        let Some(rate_fps) = self.config.rate_fps else {
+            return;
+        };
+        let period = Duration::from_secs_f64(1.0 / f64::from(rate_fps));
+        let now = Instant::now();
+        let due = self.next_due.unwrap_or(now);
+        if due > now {
+            thread::sleep(due - now);
+        }
+        let next = due + period;
+        self.next_due = Some(if next < Instant::now() {
+            Instant::now() + period
+        } else {
+            next
+        });
+    }
+}
+
+impl DepthSource for SimulatedDepthCamera {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Paces to `rate_fps` if set, then renders the next frame, stamped with the time on the
+    /// camera's clock when rendering began (its capture time).
+    fn next_observation(&mut self) -> Result<Observation, SourceError> {
+        self.pace();
+        let capture_time = self.start.elapsed();
+        let frame = self.render(self.frame_index, capture_time);
+        self.frame_index += 1;
+        Ok(Observation::Depth(frame))
+    }
+}
+
+fn check_config(config: &DepthCameraConfig) -> Result<(), DepthCameraError> {
+    let k = config.intrinsics;
+    let focal_ok = |f: f32| f.is_finite() && f != 0.0;
+    if k.width == 0
+        || k.height == 0
+        || !focal_ok(k.fx)
+        || !focal_ok(k.fy)
+        || !(k.cx.is_finite() && k.cy.is_finite())
+    {
+        return Err(DepthCameraError::InvalidIntrinsics { intrinsics: k });
+    }
+    let pose = config.world_from_sensor;
+    if !(pose.is_finite() && pose.matrix3.determinant() != 0.0) {
+        return Err(DepthCameraError::InvalidPose {
+            world_from_sensor: pose,
+        });
+    }
+    if !(config.max_range_m.is_finite() && config.max_range_m > 0.0) {
+        return Err(DepthCameraError::InvalidRange {
+            max_range_m: config.max_range_m,
+        });
+    }
+    if let Some(rate_fps) = config.rate_fps {
+        if !(rate_fps.is_finite() && rate_fps > 0.0) {
+            return Err(DepthCameraError::InvalidRate { rate_fps });
+        }
+    }
+    config.noise.check()
+}
+
+/// The ChaCha8 key of a frame: the seed and the frame index side by side (no collisions).
+/// Rows use streams of this key.
+fn row_key(seed: u64, frame_index: u64) -> [u8; 32] {
+    let mut key = [0u8; 32];
+    key[..8].copy_from_slice(&seed.to_le_bytes());
+    key[8..16].copy_from_slice(&frame_index.to_le_bytes());
+    key
+}
+
+/// If pixel `(u, v)` lies on a depth edge, the clean depth of the 4-neighbour that differs most
+/// (by more than the edge threshold); neighbours without a hit are ignored.
+fn edge_partner(
+    clean_m: &[f32],
+    width: usize,
+    height: usize,
+    u: usize,
+    v: usize,
+    noise: &DepthNoise,
+) -> Option<f32> {
+    let z = clean_m[v * width + u];
+    let neighbours = [
+        (u > 0).then(|| clean_m[v * width + u - 1]),
+        (u + 1 < width).then(|| clean_m[v * width + u + 1]),
+        (v > 0).then(|| clean_m[(v - 1) * width + u]),
+        (v + 1 < height).then(|| clean_m[(v + 1) * width + u]),
+    ];
+    neighbours
+        .into_iter()
+        .flatten()
+        .filter(|&n| n > 0.0 && (n - z).abs() > noise.flying_pixel_edge_m)
+        .max_by(|a, b| (a - z).abs().total_cmp(&(b - z).abs()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::SceneObject;
+    use crate::Shape;
+    use tacmesh_source::TriMesh;
+
+    /// A 10 m × 10 m plane at z = 0 facing +Z.
+    fn floor() -> SceneObject {
+        SceneObject {
+            id: 7,
+            mesh: TriMesh::new(
+                vec![
+                    Vec3::new(-5.0, -5.0, 0.0),
+                    Vec3::new(5.0, -5.0, 0.0),
+                    Vec3::new(5.0, 5.0, 0.0),
+                    Vec3::new(-5.0, 5.0, 0.0),
+                ],
+                vec![[0, 1, 2], [0, 2, 3]],
+            ),
+            world_from_object: Affine3A::IDENTITY,
+        }
+    }
+
+    fn looking_down_from(height_m: f32, noise: DepthNoise) -> DepthCameraConfig {
+        DepthCameraConfig {
+            world_from_sensor: look_at(Vec3::new(0.0, 0.0, height_m), Vec3::ZERO, Vec3::Y),
+            noise,
+            rate_fps: None,
+            ..DepthCameraConfig::default()
+        }
+    }
+
+    fn floor_camera(height_m: f32, noise: DepthNoise) -> SimulatedDepthCamera {
+        let scene = Scene {
+            objects: vec![floor()],
+        };
+        SimulatedDepthCamera::new("test", &scene, looking_down_from(height_m, noise)).unwrap()
+    }
+
+    fn depth_of(observation: Observation) -> DepthFrame {
+        match observation {
+            Observation::Depth(frame) => frame,
+            other => panic!("expected a depth frame, got {other:?}"),
+        }
+    }
+
+    /// Möller–Trumbore against every triangle: the exact nearest hit, independent of parry.
+    fn brute_force_hit(mesh: &TriMesh, pose: Affine3A, origin: Vec3, dir: Vec3) -> Option<f32> {
+        (0..mesh.triangles.len())
+            .filter_map(|t| {
+                let [a, b, c] = mesh.corners(t).map(|p| pose.transform_point3(p));
+                let (e1, e2) = (b - a, c - a);
+                let p = dir.cross(e2);
+                let det = e1.dot(p);
+                if det.abs() < 1e-12 {
+                    return None;
+                }
+                let s = origin - a;
+                let bu = s.dot(p) / det;
+                let q = s.cross(e1);
+                let bv = dir.dot(q) / det;
+                let t = e2.dot(q) / det;
+                (bu >= 0.0 && bv >= 0.0 && bu + bv <= 1.0 && t > 0.0).then_some(t)
+            })
+            .min_by(f32::total_cmp)
+    }
+
+    #[test]
+    fn look_at_points_sensor_axes_right_down_forward() {
+        let pose = DepthCameraConfig::tabletop_pose();
+        let eye = Vec3::from(pose.translation);
+        assert!((eye.length() - DEFAULT_VIEW_DISTANCE_M).abs() < 1e-6);
+        assert!(eye.z > 0.0 && eye.y < 0.0, "eye {eye}");
+        // The optical axis goes through the table centre, 45° downwards.
+        let forward = pose.transform_vector3(Vec3::Z);
+        assert!(forward.dot(-eye.normalize()) > 1.0 - 1e-6);
+        assert!((forward.z + std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6);
+        // World +X is image right, world up is image up (smaller v).
+        let sensor_from_world = pose.inverse();
+        let project = |p: Vec3| {
+            let q = sensor_from_world.transform_point3(p);
+            let k = DEFAULT_INTRINSICS;
+            (k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy)
+        };
+        let (u0, v0) = project(Vec3::ZERO);
+        assert!((u0 - 319.5).abs() < 1e-3 && (v0 - 239.5).abs() < 1e-3);
+        let (u_right, _) = project(Vec3::new(0.1, 0.0, 0.0));
+        assert!(u_right > u0 + 10.0);
+        let (_, v_up) = project(Vec3::new(0.0, 0.0, 0.1));
+        assert!(v_up < v0 - 10.0);
+        // Rigid: the rotation is orthonormal and right-handed.
+        assert!((pose.matrix3.determinant() - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn depth_is_exact_on_a_plane_one_metre_below() {
+        let mut camera = floor_camera(1.0, DepthNoise::NONE);
+        let frame = depth_of(camera.next_observation().unwrap());
+        assert!(frame.is_consistent());
+        assert_eq!(frame.intrinsics, DEFAULT_INTRINSICS);
+        let worst = frame
+            .depth_m
+            .iter()
+            .map(|z| (z - 1.0).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst <= 1e-5, "worst depth error {worst} m");
+        assert!(camera.render_ids().iter().all(|&id| id == Some(7)));
+    }
+
+    #[test]
+    fn sphere_depth_at_centre_and_background_around_it() {
+        // Off the pole so the centre ray hits the inside of a triangle, not a vertex.
+        let sphere_centre = Vec3::new(0.013, 0.021, 0.0);
+        let sphere = SceneObject {
+            id: 3,
+            mesh: Shape::Sphere.mesh(),
+            world_from_object: Affine3A::from_translation(sphere_centre),
+        };
+        let scene = Scene {
+            objects: vec![sphere.clone()],
+        };
+        let config = looking_down_from(2.0, DepthNoise::NONE);
+        let camera = SimulatedDepthCamera::new("test", &scene, config).unwrap();
+        let depth_m = camera.render_depth(0);
+        let k = config.intrinsics;
+        let width = k.width as usize;
+        let (uc, vc) = (320usize, 240usize);
+        let eye = Vec3::new(0.0, 0.0, 2.0);
+        let dir = config
+            .world_from_sensor
+            .transform_vector3(k.ray(uc as f32, vc as f32));
+        let expected = brute_force_hit(&sphere.mesh, sphere.world_from_object, eye, dir).unwrap();
+        let centre = depth_m[vc * width + uc];
+        assert!((centre - expected).abs() < 1e-5, "{centre} vs {expected}");
+        // The faceted sphere of radius 0.5 m is within 1 cm of the round one.
+        assert!((centre - 1.5).abs() < 0.01, "{centre}");
+        // Pixels clearly outside the sphere's silhouette read 0, clearly inside read a depth.
+        let to_centre = (sphere_centre - eye).normalize();
+        let half_angle = (0.5 / (sphere_centre - eye).length()).asin();
+        for (i, &z) in depth_m.iter().enumerate() {
+            let (u, v) = ((i % width) as f32, (i / width) as f32);
+            let ray = config.world_from_sensor.transform_vector3(k.ray(u, v));
+            let angle = ray.normalize().dot(to_centre).clamp(-1.0, 1.0).acos();
+            if angle > half_angle + 0.01 {
+                assert_eq!(z, 0.0, "pixel ({u}, {v}) sees something");
+            } else if angle < half_angle - 0.02 {
+                assert!(z > 1.4 && z < 2.0, "pixel ({u}, {v}) reads {z}");
+            }
+        }
+    }
+
+    #[test]
+    fn axial_noise_grows_with_the_square_of_depth() {
+        let noise = DepthNoise {
+            sigma_at_1m_m: 0.01,
+            dropout_probability: 0.0,
+            flying_pixel_probability: 0.0,
+            ..DepthNoise::default()
+        };
+        let camera = floor_camera(2.0, noise);
+        let depth_m = camera.render_depth(0);
+        let n = depth_m.len() as f64;
+        let mean = depth_m.iter().map(|&z| f64::from(z)).sum::<f64>() / n;
+        let var = depth_m
+            .iter()
+            .map(|&z| (f64::from(z) - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1.0);
+        let std = var.sqrt();
+        assert!((mean - 2.0).abs() < 1e-3, "mean {mean}");
+        assert!(
+            (std - 0.04).abs() < 0.004,
+            "std {std}, expected k·z² = 0.04"
+        );
+    }
+
+    #[test]
+    fn constant_sigma_replaces_the_quadratic_model() {
+        let noise = DepthNoise {
+            constant_sigma_m: Some(0.02),
+            ..DepthNoise::NONE
+        };
+        assert_eq!(noise.sigma_m(3.0), 0.02);
+        let depth_m = floor_camera(2.0, noise).render_depth(0);
+        let n = depth_m.len() as f64;
+        let rms = (depth_m
+            .iter()
+            .map(|&z| (f64::from(z) - 2.0).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        assert!((rms - 0.02).abs() < 0.002, "rms {rms}");
+    }
+
+    #[test]
+    fn dropout_rate_matches_its_probability() {
+        let noise = DepthNoise {
+            dropout_probability: 0.1,
+            ..DepthNoise::NONE
+        };
+        let depth_m = floor_camera(1.0, noise).render_depth(3);
+        let rate = depth_m.iter().filter(|&&z| z == 0.0).count() as f64 / depth_m.len() as f64;
+        // 307 200 pixels: the binomial standard error is 0.0005.
+        assert!((rate - 0.1).abs() < 0.003, "dropout rate {rate}");
+    }
+
+    #[test]
+    fn flying_pixels_appear_between_surfaces_only_at_edges() {
+        // A cube 0.5 m in front of a floor: its silhouette is a 0.5 m depth edge.
+        let scene = Scene {
+            objects: vec![
+                floor(),
+                SceneObject {
+                    id: 1,
+                    mesh: Shape::Cube.mesh(),
+                    world_from_object: Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.5)),
+                },
+            ],
+        };
+        let render = |probability| {
+            let noise = DepthNoise {
+                flying_pixel_probability: probability,
+                ..DepthNoise::NONE
+            };
+            let config = looking_down_from(3.0, noise);
+            let camera = SimulatedDepthCamera::new("test", &scene, config).unwrap();
+            camera.render_depth(0)
+        };
+        // Clean depths are 2.0 (cube top) and 3.0 (floor); flying pixels lie between.
+        let between = |depth_m: &[f32]| {
+            depth_m
+                .iter()
+                .filter(|&&z| z > 2.0 + 1e-4 && z < 3.0 - 1e-4)
+                .count()
+        };
+        assert_eq!(between(&render(0.0)), 0);
+        // The top face, 1 m at 2 m, is 262 pixels wide: its outline is about 4 × 262 pixels on
+        // each side of the edge, and every one of them flies.
+        let flying = between(&render(1.0));
+        assert!((1800..2400).contains(&flying), "{flying} flying pixels");
+    }
+
+    #[test]
+    fn same_seed_and_frame_give_identical_frames() {
+        let a = SimulatedDepthCamera::tabletop(42);
+        let b = SimulatedDepthCamera::tabletop(42);
+        assert_eq!(a.render_depth(5), b.render_depth(5));
+        assert_ne!(a.render_depth(5), a.render_depth(6));
+        assert_ne!(
+            a.render_depth(5),
+            SimulatedDepthCamera::tabletop(43).render_depth(5)
+        );
+        // The same through the DepthSource interface, apart from the capture time.
+        let unpaced = |seed| {
+            let mut camera = SimulatedDepthCamera::tabletop(seed);
+            camera.config.rate_fps = None;
+            camera
+        };
+        let (mut a, mut b) = (unpaced(42), unpaced(42));
+        let a0 = depth_of(a.next_observation().unwrap());
+        let b0 = depth_of(b.next_observation().unwrap());
+        assert_eq!(a0.depth_m, b0.depth_m);
+        let a1 = depth_of(a.next_observation().unwrap());
+        assert_ne!(a0.depth_m, a1.depth_m);
+        assert_eq!(a.frame_index(), 2);
+        assert!(a1.capture_time > a0.capture_time);
+    }
+
+    #[test]
+    fn frames_do_not_depend_on_the_thread_count() {
+        let camera = SimulatedDepthCamera::tabletop(9);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let single = pool.install(|| camera.render_depth(4));
+        assert_eq!(single, camera.render_depth(4));
+    }
+
+    #[test]
+    fn tabletop_camera_sees_the_table_and_all_three_objects() {
+        let camera = SimulatedDepthCamera::tabletop(0);
+        assert_eq!(camera.name(), "sim:tabletop");
+        let ids = camera.render_ids();
+        let mut counts = [0usize; 4];
+        for id in ids.iter().flatten() {
+            counts[*id as usize] += 1;
+        }
+        // Each 0.2 m object at about 1.2 m covers thousands of pixels (the flat torus fewer).
+        assert!(counts[0] > 100_000, "table pixels {counts:?}");
+        for (id, &count) in counts.iter().enumerate().skip(1) {
+            assert!(count > 1000, "object {id} barely visible: {counts:?}");
+        }
+    }
+
+    #[test]
+    fn deprojected_noiseless_frame_lies_on_the_scene() {
+        let config = DepthCameraConfig {
+            noise: DepthNoise::NONE,
+            rate_fps: None,
+            ..DepthCameraConfig::default()
+        };
+        let camera = SimulatedDepthCamera::new("test", &Scene::tabletop(), config).unwrap();
+        let frame = camera.render(0, Duration::ZERO);
+        let k = frame.intrinsics;
+        let width = k.width as usize;
+        let mut checked = 0;
+        for (i, &z) in frame.depth_m.iter().enumerate() {
+            if z == 0.0 {
+                continue;
+            }
+            let p_in_sensor = z * k.ray((i % width) as f32, (i / width) as f32);
+            let p_in_world = frame.world_from_sensor.transform_point3(p_in_sensor);
+            let d = camera.scene_bvh().distance_to_surface(p_in_world);
+            assert!(d < 1e-4, "pixel {i} at {p_in_world} is {d} m off the scene");
+            checked += 1;
+        }
+        assert!(checked > 200_000, "only {checked} valid pixels");
+    }
+
+    #[test]
+    fn surfaces_beyond_max_range_read_zero() {
+        let config = DepthCameraConfig {
+            max_range_m: 0.9,
+            ..looking_down_from(1.0, DepthNoise::NONE)
+        };
+        let scene = Scene {
+            objects: vec![floor()],
+        };
+        let camera = SimulatedDepthCamera::new("test", &scene, config).unwrap();
+        assert!(camera.render_depth(0).iter().all(|&z| z == 0.0));
+        assert!(camera.render_ids().iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn new_rejects_out_of_range_configuration() {
+        let scene = Scene::default();
+        let with = |change: fn(&mut DepthCameraConfig)| {
+            let mut config = DepthCameraConfig::default();
+            change(&mut config);
+            SimulatedDepthCamera::new("test", &scene, config).err()
+        };
+        assert!(with(|_| {}).is_none());
+        assert!(matches!(
+            with(|c| c.noise.dropout_probability = 1.5),
+            Some(DepthCameraError::InvalidNoise {
+                field: "dropout_probability",
+                ..
+            })
+        ));
+        assert!(matches!(
+            with(|c| c.intrinsics.width = 0),
+            Some(DepthCameraError::InvalidIntrinsics { .. })
+        ));
+        assert!(matches!(
+            with(|c| c.rate_fps = Some(0.0)),
+            Some(DepthCameraError::InvalidRate { .. })
+        ));
+        assert!(matches!(
+            with(|c| c.max_range_m = f32::NAN),
+            Some(DepthCameraError::InvalidRange { .. })
+        ));
+        assert!(matches!(
+            with(|c| c.world_from_sensor = Affine3A::ZERO),
+            Some(DepthCameraError::InvalidPose { .. })
+        ));
+    }
+
+    #[test]
+    fn paced_camera_keeps_its_rate() {
+        let mut camera = floor_camera(1.0, DepthNoise::NONE);
+        camera.config.rate_fps = Some(50.0);
+        let started = Instant::now();
+        for _ in 0..4 {
+            camera.next_observation().unwrap();
+        }
+        // Frames at 0, 20, 40, 60 ms: at least 60 ms (no upper bound: CI machines stall).
+        assert!(started.elapsed() >= Duration::from_millis(60));
+    }
+
+    /// Not a test: prints the render time per frame on 1 and 2 threads. Run with
+    /// `cargo test -p tacmesh-sim --release depth_camera_render_time -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "benchmark, prints timings"]
+    fn depth_camera_render_time() {
+        let camera = SimulatedDepthCamera::tabletop(1);
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                camera.render_depth(0);
+                let frames = 60;
+                let started = Instant::now();
+                for i in 0..frames {
+                    std::hint::black_box(camera.render_depth(i));
+                }
+                let per_frame = started.elapsed() / frames as u32;
+                let started = Instant::now();
+                for _ in 0..frames {
+                    std::hint::black_box(camera.render_ids());
+                }
+                let cast_only = started.elapsed() / frames as u32;
+                println!(
+                    "{threads} thread(s): {per_frame:?} per 640x480 frame with noise, {cast_only:?} ray casting only"
+                );
+            });
+        }
+    }
+}
