@@ -37,3 +37,45 @@ fn milk_carton_scan_meshes_small() {
     assert!((4..200).contains(&faces), "milk carton faces {faces}");
     assert!(report["recon_faces"].as_u64().expect("recon") > 10 * faces);
 }
+
+/// The PCL Kinect grabber's organised cloud was made from its depth image with fx = fy = 525,
+/// cx = 320, cy = 240 (SOURCES.md). Taking each valid pixel's z as the depth and deprojecting
+/// it must give back that pixel's x and y: the pinhole convention matches PCL's.
+#[test]
+fn kinect_frame_deprojects_like_pcl() {
+    use tacmesh::glam::{Affine3A, Vec3};
+    use tacmesh::source::{DepthFrame, Intrinsics};
+
+    let pcd = tacmesh::formats::pcd::read_pcd(&shared_data(
+        "depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd",
+    ))
+    .expect("the grabber's PCD reads");
+    assert_eq!((pcd.width, pcd.height), (640, 480));
+    let frame = DepthFrame {
+        intrinsics: Intrinsics {
+            width: 640,
+            height: 480,
+            fx: 525.0,
+            fy: 525.0,
+            cx: 320.0,
+            cy: 240.0,
+        },
+        depth_m: pcd.points.iter().map(|p| p.z).collect(),
+        world_from_sensor: Affine3A::IDENTITY,
+        capture_time: std::time::Duration::ZERO,
+    };
+    let deprojected = frame.deproject(10.0);
+    let expected: Vec<Vec3> = pcd.points.iter().copied().filter(|p| p.z > 0.0).collect();
+    assert_eq!(deprojected.points_in_world.len(), 271_575);
+    assert_eq!(deprojected.invalid_pixels, 640 * 480 - 271_575);
+    let worst = deprojected
+        .points_in_world
+        .iter()
+        .zip(&expected)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 1e-6,
+        "deprojection differs from PCL by up to {worst} m"
+    );
+}

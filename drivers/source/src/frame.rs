@@ -33,9 +33,76 @@ pub struct DepthFrame {
     pub capture_time: Duration,
 }
 
+/// A depth frame turned into points: the valid pixels' points in the world frame, in row-major
+/// pixel order, and how many pixels had no usable reading.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Deprojection {
+    pub points_in_world: Vec<Vec3>,
+    pub invalid_pixels: usize,
+}
+
 impl DepthFrame {
     /// Whether the depth buffer has exactly `width * height` entries.
     pub fn is_consistent(&self) -> bool {
         self.depth_m.len() == self.intrinsics.width as usize * self.intrinsics.height as usize
+    }
+
+    /// Back-projects every pixel with a reading in `(0, max_range_m]` through the pinhole model
+    /// (pixel `(u, v)` at integer coordinates, OpenCV/PCL convention) and moves it into the world
+    /// frame. Zero, negative, non-finite and out-of-range depths become no point and are counted
+    /// as invalid; so are pixels missing from a short buffer.
+    pub fn deproject(&self, max_range_m: f32) -> Deprojection {
+        let Intrinsics { width, height, .. } = self.intrinsics;
+        let pixels = width as usize * height as usize;
+        let mut out = Deprojection {
+            points_in_world: Vec::with_capacity(pixels.min(self.depth_m.len())),
+            invalid_pixels: pixels.saturating_sub(self.depth_m.len()),
+        };
+        for (i, &z) in self.depth_m.iter().take(pixels).enumerate() {
+            if !(z > 0.0 && z <= max_range_m) {
+                out.invalid_pixels += 1;
+                continue;
+            }
+            let (u, v) = ((i % width as usize) as f32, (i / width as usize) as f32);
+            let p_in_sensor = self.intrinsics.ray(u, v) * z;
+            out.points_in_world
+                .push(self.world_from_sensor.transform_point3(p_in_sensor));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(depth_m: Vec<f32>) -> DepthFrame {
+        DepthFrame {
+            intrinsics: Intrinsics {
+                width: 2,
+                height: 2,
+                fx: 2.0,
+                fy: 2.0,
+                cx: 0.5,
+                cy: 0.5,
+            },
+            depth_m,
+            world_from_sensor: Affine3A::from_translation(Vec3::new(0.0, 0.0, 1.0)),
+            capture_time: Duration::ZERO,
+        }
+    }
+
+    #[test]
+    fn deproject_skips_and_counts_invalid_depths() {
+        let d = frame(vec![0.0, f32::NAN, 2.0, 9.0]).deproject(5.0);
+        assert_eq!(d.invalid_pixels, 3);
+        // Pixel (0, 1) at 2 m: x = (0 - 0.5) / 2 * 2, y = (1 - 0.5) / 2 * 2, then +1 m in z.
+        assert_eq!(d.points_in_world, vec![Vec3::new(-0.5, 0.5, 3.0)]);
+    }
+
+    #[test]
+    fn deproject_counts_pixels_missing_from_a_short_buffer() {
+        let d = frame(vec![1.0]).deproject(5.0);
+        assert_eq!((d.points_in_world.len(), d.invalid_pixels), (1, 3));
     }
 }

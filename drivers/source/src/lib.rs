@@ -15,7 +15,7 @@ mod mesh;
 mod source;
 
 pub use cloud::PointCloud;
-pub use frame::{DepthFrame, Intrinsics};
+pub use frame::{Deprojection, DepthFrame, Intrinsics};
 pub use mesh::TriMesh;
 pub use source::{DepthSource, Observation, SourceError};
 
