@@ -1,5 +1,7 @@
 //! tacmesh: live depth scans to small, accurate, physics-ready meshes of the objects in view.
 
+pub mod frame_ring;
+pub mod latency;
 pub mod pipeline;
 
 pub use tacmesh_formats as formats;
