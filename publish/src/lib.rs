@@ -1,0 +1,505 @@
+//! The publish stage: serves the current mesh of every object to subscribers on a Unix stream
+//! socket, in the wire format of `tacmesh-protocol` (`docs/protocol.md`).
+//!
+//! Entry points:
+//! - [`Publisher::bind`]: claim the socket path (refusing a live daemon or a non-socket, removing
+//!   a stale socket), set its mode, and start accepting subscribers.
+//! - [`Publisher::upsert`], [`Publisher::remove`], [`Publisher::stats`]: called by the pipeline;
+//!   they never wait for a subscriber.
+//! - [`Publisher::counters`], [`Publisher::shutdown`].
+//!
+//! Every subscriber gets `Hello`, an `Upsert` of every current object, `SnapshotDone`, then live
+//! updates. Each subscriber has its own writer thread and a pending state that holds at most the
+//! latest unsent mesh of each object, the unsent removes and the latest stats: a slow subscriber
+//! skips versions, and its memory stays bounded by the number of objects. A subscriber that reads
+//! nothing for [`WRITE_TIMEOUT`] is dropped. A reader thread per subscriber decodes what it sends;
+//! anything but a well-formed `Subscribe` gets it dropped with one WARN line. Blocking std
+//! threads only.
+
+mod bind;
+mod client;
+
+#[cfg(test)]
+mod tests;
+
+use std::collections::BTreeMap;
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use tacmesh_protocol::{encode, Message, Stats, Upsert, WireError, MAX_REASON_BYTES};
+
+use crate::client::{Client, Frame, Retire};
+
+/// Socket file mode when the config does not say otherwise: owner and group read and write.
+pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
+
+/// A subscriber whose socket accepts no bytes for this long is dropped. The timeout applies
+/// to each blocking write, and a write that made some progress before stalling returns that
+/// progress first, so a subscriber that stops reading is dropped between one and two
+/// timeouts after it stopped.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How long [`Publisher::shutdown`] waits for subscribers to take their `Goodbye` before it
+/// closes their sockets anyway.
+pub const GOODBYE_GRACE: Duration = Duration::from_secs(1);
+
+/// Where and how to publish.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PublisherConfig {
+    /// The Unix socket path. Its directory must exist.
+    pub socket_path: PathBuf,
+    /// Permission bits of the socket file (connecting needs write permission), e.g. `0o660`.
+    pub mode: u32,
+    /// Sent in `Hello`, e.g. `tacmesh 0.1.0`; at most 64 bytes.
+    pub server_name: String,
+}
+
+impl PublisherConfig {
+    /// A config with the default mode ([`DEFAULT_SOCKET_MODE`]) and server name (`tacmesh 0.1.0`).
+    pub fn new(socket_path: impl Into<PathBuf>) -> Self {
+        Self {
+            socket_path: socket_path.into(),
+            mode: DEFAULT_SOCKET_MODE,
+            server_name: format!("tacmesh {}", env!("CARGO_PKG_VERSION")),
+        }
+    }
+}
+
+/// What the publisher has done so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PublisherCounters {
+    /// Subscribers connected now.
+    pub clients_connected: usize,
+    /// Subscribers the publisher disconnected because they misbehaved: sent a malformed,
+    /// oversize or wrong-direction frame, or read nothing for [`WRITE_TIMEOUT`]. Subscribers that
+    /// simply disconnect are not counted.
+    pub clients_dropped: u64,
+    /// Upsert frames written to subscribers (snapshot and live), summed over subscribers.
+    pub meshes_published: u64,
+    /// Bytes written to all subscribers.
+    pub bytes_sent: u64,
+}
+
+/// Everything that can go wrong when publishing, said so that the operator knows what to do.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PublishError {
+    #[error("another tacmesh daemon is serving {}; stop it or choose another --socket", path.display())]
+    AlreadyRunning { path: PathBuf },
+
+    #[error(
+        "{} exists and is not a socket; tacmesh will not replace it: remove it or choose \
+         another --socket",
+        path.display()
+    )]
+    NotASocket { path: PathBuf },
+
+    #[error(
+        "the directory {} for the socket does not exist: create it or choose another --socket",
+        dir.display()
+    )]
+    NoSocketDir { dir: PathBuf },
+
+    #[error(
+        "cannot check whether a daemon serves {}: {source}; check the permissions of the \
+         path or choose another --socket",
+        path.display()
+    )]
+    Probe {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    #[error(
+        "cannot remove the stale socket {}: {source}; remove it yourself or choose another \
+         --socket",
+        path.display()
+    )]
+    RemoveStale {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    #[error(
+        "cannot bind the socket {}: {source}; check that its directory is writable and the \
+         path is shorter than 108 bytes",
+        path.display()
+    )]
+    Bind {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+
+    #[error("cannot set mode {mode:04o} on the socket {}: {source}", path.display())]
+    SetMode {
+        path: PathBuf,
+        mode: u32,
+        source: std::io::Error,
+    },
+
+    #[error("socket mode {mode:o} is not a set of permission bits: give a mode such as 0o660")]
+    InvalidMode { mode: u32 },
+
+    #[error("server name {name:?} cannot be sent in a Hello: {source}")]
+    ServerName { name: String, source: WireError },
+
+    #[error("cannot start the publisher's accept thread: {source}")]
+    Spawn { source: std::io::Error },
+
+    #[error(
+        "object {object_id}: version {version} is not newer than the published version \
+         {current}; every new mesh of an object needs a higher version"
+    )]
+    VersionNotNewer {
+        object_id: u64,
+        version: u64,
+        current: u64,
+    },
+
+    #[error("the mesh of object {object_id} cannot be published: {source}")]
+    EncodeUpsert { object_id: u64, source: WireError },
+
+    #[error("the stats cannot be published: {source}")]
+    EncodeStats { source: WireError },
+}
+
+/// State shared by the publisher handle, the accept thread and every subscriber's threads.
+pub(crate) struct Shared {
+    /// The encoded Hello, the same for every subscriber.
+    hello: Vec<u8>,
+    /// [`WRITE_TIMEOUT`] except in tests.
+    write_timeout: Duration,
+    state: Mutex<State>,
+    clients_dropped: AtomicU64,
+    meshes_published: AtomicU64,
+    bytes_sent: AtomicU64,
+}
+
+/// Lock order: `State` before any `Client::pending`.
+#[derive(Default)]
+struct State {
+    /// The latest encoded Upsert of every current object: the snapshot a new subscriber gets.
+    objects: BTreeMap<u64, Arc<Frame>>,
+    clients: BTreeMap<u64, Arc<Client>>,
+    next_client: u64,
+    /// Set by shutdown: no new subscribers.
+    stopping: bool,
+}
+
+/// Locks a mutex, going on with the data if a thread panicked while holding it: every state
+/// here stays consistent between statements, and the publisher must keep serving the others.
+pub(crate) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The publish stage. Dropping it shuts it down (see [`Publisher::shutdown`]).
+pub struct Publisher {
+    shared: Arc<Shared>,
+    path: PathBuf,
+    /// (device, inode) of the socket file we bound, so that shutdown removes only our own file.
+    file_id: Option<(u64, u64)>,
+    accept: Option<JoinHandle<()>>,
+    shut_down: bool,
+}
+
+impl std::fmt::Debug for Publisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Publisher")
+            .field("path", &self.path)
+            .field("counters", &self.counters())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Publisher {
+    /// Claims `config.socket_path` and starts serving subscribers.
+    ///
+    /// An existing path: if a daemon answers a connect on it, [`PublishError::AlreadyRunning`];
+    /// if it is a socket nobody answers (left by a daemon that died), it is removed; if it is not
+    /// a socket, [`PublishError::NotASocket`]. The socket file gets `config.mode`.
+    pub fn bind(config: PublisherConfig) -> Result<Publisher, PublishError> {
+        Self::bind_with_write_timeout(config, WRITE_TIMEOUT)
+    }
+
+    /// [`Publisher::bind`] with another write timeout, so that tests need not wait for the
+    /// real one.
+    pub(crate) fn bind_with_write_timeout(
+        config: PublisherConfig,
+        write_timeout: Duration,
+    ) -> Result<Publisher, PublishError> {
+        let mut hello = Vec::new();
+        encode(&Message::hello(config.server_name.as_str()), &mut hello).map_err(|source| {
+            PublishError::ServerName {
+                name: config.server_name.clone(),
+                source,
+            }
+        })?;
+        let bound = bind::claim(&config.socket_path, config.mode)?;
+        let shared = Arc::new(Shared {
+            hello,
+            write_timeout,
+            state: Mutex::new(State::default()),
+            clients_dropped: AtomicU64::new(0),
+            meshes_published: AtomicU64::new(0),
+            bytes_sent: AtomicU64::new(0),
+        });
+        let accept_shared = Arc::clone(&shared);
+        let listener = bound.listener;
+        let accept = std::thread::Builder::new()
+            .name("publish-accept".into())
+            .spawn(move || accept_loop(&accept_shared, listener));
+        let accept = match accept {
+            Ok(handle) => handle,
+            Err(source) => {
+                bind::remove_if_ours(&config.socket_path, bound.file_id);
+                return Err(PublishError::Spawn { source });
+            }
+        };
+        tracing::info!(
+            "publishing meshes on {} (mode {:04o})",
+            config.socket_path.display(),
+            config.mode
+        );
+        Ok(Publisher {
+            shared,
+            path: config.socket_path,
+            file_id: bound.file_id,
+            accept: Some(accept),
+            shut_down: false,
+        })
+    }
+
+    /// The socket path this publisher serves.
+    pub fn socket_path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Publishes a new mesh of an object (new or known). Returns at once: each subscriber's
+    /// writer sends it when it can, and a newer mesh of the same object replaces an unsent one.
+    ///
+    /// Errors: [`PublishError::VersionNotNewer`] if `upsert.version` is not above the version
+    /// last published for this object (nothing is published), [`PublishError::EncodeUpsert`]
+    /// for a mesh the wire format refuses (non-finite vertex, bad index, over the frame cap).
+    pub fn upsert(&self, upsert: Upsert) -> Result<(), PublishError> {
+        let object_id = upsert.object_id;
+        let version = upsert.version;
+        if let Some(current) = self.current_version(object_id) {
+            if version <= current {
+                return Err(PublishError::VersionNotNewer {
+                    object_id,
+                    version,
+                    current,
+                });
+            }
+        }
+        let mut bytes = Vec::new();
+        encode(&Message::Upsert(upsert), &mut bytes)
+            .map_err(|source| PublishError::EncodeUpsert { object_id, source })?;
+        let frame = Arc::new(Frame { version, bytes });
+
+        let mut state = lock(&self.shared.state);
+        if let Some(current) = state.objects.get(&object_id) {
+            // Checked again under the lock in case two threads publish the same object.
+            if version <= current.version {
+                return Err(PublishError::VersionNotNewer {
+                    object_id,
+                    version,
+                    current: current.version,
+                });
+            }
+        }
+        state.objects.insert(object_id, Arc::clone(&frame));
+        for client in state.clients.values() {
+            client.queue_upsert(object_id, &frame);
+        }
+        Ok(())
+    }
+
+    /// Publishes that an object is gone. An unsent mesh of it is not sent. Unknown ids are
+    /// ignored. Returns at once.
+    pub fn remove(&self, object_id: u64) {
+        let mut state = lock(&self.shared.state);
+        if state.objects.remove(&object_id).is_none() {
+            return;
+        }
+        for client in state.clients.values() {
+            client.queue_remove(object_id);
+        }
+    }
+
+    /// Publishes stats; a subscriber that has not yet been sent the previous stats gets only
+    /// these. Returns at once. Errors: [`PublishError::EncodeStats`] for values the wire format
+    /// refuses (a NaN or negative latency, a stage name over 64 bytes).
+    pub fn stats(&self, stats: Stats) -> Result<(), PublishError> {
+        let mut bytes = Vec::new();
+        encode(&Message::Stats(stats), &mut bytes)
+            .map_err(|source| PublishError::EncodeStats { source })?;
+        let frame = Arc::new(bytes);
+        let state = lock(&self.shared.state);
+        for client in state.clients.values() {
+            client.queue_stats(&frame);
+        }
+        Ok(())
+    }
+
+    /// The counters so far.
+    pub fn counters(&self) -> PublisherCounters {
+        let clients_connected = lock(&self.shared.state).clients.len();
+        PublisherCounters {
+            clients_connected,
+            clients_dropped: self.shared.clients_dropped.load(Ordering::Relaxed),
+            meshes_published: self.shared.meshes_published.load(Ordering::Relaxed),
+            bytes_sent: self.shared.bytes_sent.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Says `Goodbye` with `reason` to every subscriber (waiting at most [`GOODBYE_GRACE`] for
+    /// them to take it), closes their connections, stops every thread and removes the socket
+    /// file. Unsent updates are discarded. Calling it again does nothing; dropping the publisher
+    /// calls it if it was not called.
+    pub fn shutdown(&mut self, reason: &str) {
+        if self.shut_down {
+            return;
+        }
+        self.shut_down = true;
+
+        let mut goodbye = Vec::new();
+        let reason_capped = cap_at_char_boundary(reason, MAX_REASON_BYTES);
+        if let Err(error) = encode(
+            &Message::Goodbye {
+                reason: reason_capped.to_owned(),
+            },
+            &mut goodbye,
+        ) {
+            // Unreachable with a capped UTF-8 string; subscribers then just see the socket close.
+            tracing::warn!("cannot encode Goodbye: {error}");
+            goodbye.clear();
+        }
+        let goodbye = Arc::new(goodbye);
+
+        let clients: Vec<Arc<Client>> = {
+            let mut state = lock(&self.shared.state);
+            state.stopping = true;
+            state.clients.values().cloned().collect()
+        };
+        for client in &clients {
+            client.say_goodbye(&goodbye);
+        }
+        // Wake the accept thread: it sees `stopping` and ends. If the connect fails the thread
+        // is left blocked in accept (detached below) and goes away with the process.
+        let woke_accept = UnixStream::connect(&self.path).is_ok();
+
+        let mut handles: Vec<JoinHandle<()>> = clients
+            .iter()
+            .flat_map(|client| client.take_threads())
+            .collect();
+        let deadline = Instant::now() + GOODBYE_GRACE;
+        while Instant::now() < deadline && !handles.iter().all(JoinHandle::is_finished) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        // Whoever has not taken the Goodbye by now is cut off; that unblocks its threads.
+        for client in &clients {
+            self.shared.retire(client, Retire::Quiet);
+        }
+        for handle in handles.drain(..) {
+            let _ = handle.join();
+        }
+        if let Some(accept) = self.accept.take() {
+            if woke_accept || accept.is_finished() {
+                let _ = accept.join();
+            }
+        }
+        bind::remove_if_ours(&self.path, self.file_id);
+        tracing::info!("stopped publishing on {} ({reason})", self.path.display());
+    }
+
+    fn current_version(&self, object_id: u64) -> Option<u64> {
+        lock(&self.shared.state)
+            .objects
+            .get(&object_id)
+            .map(|frame| frame.version)
+    }
+}
+
+impl Drop for Publisher {
+    fn drop(&mut self) {
+        self.shutdown("the daemon is shutting down");
+    }
+}
+
+fn cap_at_char_boundary(text: &str, max: usize) -> &str {
+    if text.len() <= max {
+        return text;
+    }
+    let mut end = max;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    &text[..end]
+}
+
+fn accept_loop(shared: &Arc<Shared>, listener: std::os::unix::net::UnixListener) {
+    for connection in listener.incoming() {
+        if lock(&shared.state).stopping {
+            break;
+        }
+        match connection {
+            Ok(stream) => shared.admit(stream),
+            Err(error) => {
+                // Typically out of file descriptors; back off instead of spinning.
+                tracing::warn!("cannot accept a subscriber: {error}");
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+}
+
+impl Shared {
+    /// Registers a new subscriber with the current snapshot and starts its threads.
+    fn admit(self: &Arc<Self>, stream: UnixStream) {
+        if let Err(error) = stream.set_write_timeout(Some(self.write_timeout)) {
+            tracing::warn!("cannot set up a new subscriber's socket: {error}");
+            return;
+        }
+        let mut state = lock(&self.state);
+        if state.stopping {
+            return;
+        }
+        let id = state.next_client;
+        state.next_client += 1;
+        let client = Arc::new(Client::new(id, stream, state.objects.clone()));
+        state.clients.insert(id, Arc::clone(&client));
+        // Threads are started under the lock so that shutdown finds their handles; they take
+        // the state lock only when they end.
+        let spawned = client::start_threads(self, &client);
+        drop(state);
+        match spawned {
+            Ok(()) => tracing::info!(client = id, "subscriber connected"),
+            Err(error) => {
+                self.retire(&client, Retire::Quiet);
+                tracing::warn!(client = id, "cannot start a subscriber's threads: {error}");
+            }
+        }
+    }
+
+    /// Disconnects a subscriber: unregisters it, closes its socket, stops its threads. Only the
+    /// first call for a subscriber logs and counts.
+    fn retire(&self, client: &Client, how: Retire) {
+        lock(&self.state).clients.remove(&client.id);
+        if !client.close() {
+            return;
+        }
+        match how {
+            Retire::Quiet => {}
+            Retire::Gone(why) => tracing::info!(client = client.id, "subscriber left: {why}"),
+            Retire::Dropped(why) => {
+                self.clients_dropped.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(client = client.id, "dropping subscriber: {why}");
+            }
+        }
+    }
+}

@@ -1,0 +1,453 @@
+//! Publisher tests on real Unix sockets in a temporary directory. Every wait is bounded.
+
+use std::io::{ErrorKind, Read, Write};
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use tacmesh_protocol::{
+    FrameDecoder, Message, Sender, SimplifyStats, Stats, Upsert, PROTOCOL_VERSION,
+};
+use tacmesh_source::TriMesh;
+
+use crate::{PublishError, Publisher, PublisherConfig};
+
+const WAIT: Duration = Duration::from_secs(5);
+
+fn socket_in(dir: &tempfile::TempDir) -> PathBuf {
+    dir.path().join("tacmesh.sock")
+}
+
+fn publisher(path: &Path) -> Publisher {
+    let mut config = PublisherConfig::new(path);
+    config.server_name = "tacmesh-test".into();
+    Publisher::bind(config).expect("bind in a fresh temp dir")
+}
+
+/// A mesh of `triangles` triangles over as many vertices (about 24 bytes per triangle).
+fn mesh(triangles: usize) -> TriMesh {
+    let vertices = (0..triangles.max(3))
+        .map(|i| Vec3::new(i as f32 * 1e-3, 0.5, -0.25))
+        .collect::<Vec<_>>();
+    let n = vertices.len() as u32;
+    let tris = (0..triangles as u32)
+        .map(|i| [i % n, (i + 1) % n, (i + 2) % n])
+        .collect();
+    TriMesh::new(vertices, tris)
+}
+
+fn upsert(object_id: u64, version: u64, triangles: usize) -> Upsert {
+    Upsert {
+        object_id,
+        version,
+        capture_time_ns: version * 1000,
+        mesh: mesh(triangles),
+        report: SimplifyStats {
+            faces_in: 100,
+            faces_out: triangles as u32,
+            max_residual_m: 0.01,
+        },
+    }
+}
+
+struct TestClient {
+    stream: UnixStream,
+    decoder: FrameDecoder,
+}
+
+impl TestClient {
+    fn connect(path: &Path) -> Self {
+        let stream = UnixStream::connect(path).expect("connect to the publisher");
+        Self {
+            stream,
+            decoder: FrameDecoder::new(Sender::Server),
+        }
+    }
+
+    /// The next message, or None at EOF; panics after `WAIT`.
+    fn next(&mut self) -> Option<Message> {
+        let deadline = Instant::now() + WAIT;
+        let mut buffer = vec![0u8; 64 * 1024];
+        loop {
+            if let Some(message) = self.decoder.next_message().expect("a valid server frame") {
+                return Some(message);
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            assert!(!left.is_zero(), "no message within {WAIT:?}");
+            self.stream.set_read_timeout(Some(left)).unwrap();
+            match self.stream.read(&mut buffer) {
+                Ok(0) => return None,
+                Ok(n) => self.decoder.push(&buffer[..n]),
+                Err(e) if e.kind() == ErrorKind::ConnectionReset => return None,
+                Err(e) => panic!("read failed: {e}"),
+            }
+        }
+    }
+
+    fn expect(&mut self) -> Message {
+        self.next().expect("a message, not EOF")
+    }
+
+    /// Reads Hello and checks it.
+    fn hello(&mut self) {
+        match self.expect() {
+            Message::Hello {
+                protocol_version,
+                server,
+            } => {
+                assert_eq!(protocol_version, PROTOCOL_VERSION);
+                assert_eq!(server, "tacmesh-test");
+            }
+            other => panic!("expected Hello, got {other:?}"),
+        }
+    }
+
+    /// Reads Upserts up to SnapshotDone; returns (object id, version) of each.
+    fn snapshot(&mut self) -> Vec<(u64, u64)> {
+        let mut objects = Vec::new();
+        loop {
+            match self.expect() {
+                Message::Upsert(u) => objects.push((u.object_id, u.version)),
+                Message::SnapshotDone => return objects,
+                other => panic!("expected Upsert or SnapshotDone, got {other:?}"),
+            }
+        }
+    }
+
+    fn upsert(&mut self) -> Upsert {
+        match self.expect() {
+            Message::Upsert(u) => u,
+            other => panic!("expected Upsert, got {other:?}"),
+        }
+    }
+}
+
+fn wait_until(what: &str, mut condition: impl FnMut() -> bool) {
+    let deadline = Instant::now() + WAIT;
+    while !condition() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn late_joiner_gets_hello_snapshot_and_snapshot_done() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    publisher.upsert(upsert(1, 1, 4)).unwrap();
+    publisher.upsert(upsert(2, 1, 4)).unwrap();
+    publisher.upsert(upsert(3, 1, 4)).unwrap();
+    publisher.upsert(upsert(3, 5, 4)).unwrap();
+    publisher.remove(2);
+
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![(1, 1), (3, 5)]);
+
+    publisher.upsert(upsert(4, 1, 4)).unwrap();
+    let live = client.upsert();
+    assert_eq!((live.object_id, live.version), (4, 1));
+    assert_eq!(live, upsert(4, 1, 4));
+    publisher.remove(1);
+    assert_eq!(client.expect(), Message::Remove { object_id: 1 });
+}
+
+#[test]
+fn empty_snapshot_still_ends_with_snapshot_done() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let _publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![]);
+}
+
+#[test]
+fn update_reaches_two_clients() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut a = TestClient::connect(&path);
+    let mut b = TestClient::connect(&path);
+    for client in [&mut a, &mut b] {
+        client.hello();
+        assert_eq!(client.snapshot(), vec![]);
+    }
+    wait_until("both clients registered", || {
+        publisher.counters().clients_connected == 2
+    });
+    publisher.upsert(upsert(9, 1, 10)).unwrap();
+    let stats = Stats {
+        frames_in: 30,
+        ..Stats::default()
+    };
+    publisher.stats(stats.clone()).unwrap();
+    for client in [&mut a, &mut b] {
+        assert_eq!(client.upsert().object_id, 9);
+        assert_eq!(client.expect(), Message::Stats(stats.clone()));
+    }
+    wait_until("meshes counted", || {
+        publisher.counters().meshes_published == 2
+    });
+    assert!(publisher.counters().bytes_sent > 0);
+}
+
+#[test]
+fn stalled_client_does_not_delay_another() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let _stalled = UnixStream::connect(&path).unwrap(); // never reads
+    let mut reader = TestClient::connect(&path);
+    reader.hello();
+    assert_eq!(reader.snapshot(), vec![]);
+    wait_until("both clients registered", || {
+        publisher.counters().clients_connected == 2
+    });
+
+    let receive = std::thread::spawn(move || {
+        let start = Instant::now();
+        let mut ids = Vec::new();
+        while ids.len() < 200 {
+            ids.push(reader.upsert().object_id);
+        }
+        (ids, start.elapsed())
+    });
+    // 200 meshes of 20 000 triangles (about 480 kB each, 96 MB in all): the stalled client's
+    // socket buffer fills within the first one.
+    let mut slowest_call = Duration::ZERO;
+    for id in 0..200 {
+        let update = upsert(id, 1, 20_000);
+        let start = Instant::now();
+        publisher.upsert(update).unwrap();
+        slowest_call = slowest_call.max(start.elapsed());
+    }
+    let (ids, elapsed) = receive.join().unwrap();
+    assert_eq!(ids, (0..200).collect::<Vec<_>>());
+    assert!(elapsed < WAIT, "the reader took {elapsed:?}");
+    assert!(
+        slowest_call < Duration::from_millis(250),
+        "a publish call took {slowest_call:?}"
+    );
+    assert_eq!(publisher.counters().clients_dropped, 0);
+}
+
+#[test]
+fn garbage_client_is_dropped_while_another_keeps_receiving() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut good = TestClient::connect(&path);
+    good.hello();
+    good.snapshot();
+    let mut bad = TestClient::connect(&path);
+    bad.hello();
+    bad.snapshot();
+    // A well-formed Subscribe is fine, then a frame of unknown kind 0x7f.
+    bad.stream
+        .write_all(&[1, 0, 0, 0, 0x80, 3, 0, 0, 0, 0x7f, 1, 2])
+        .unwrap();
+    wait_until("the garbage client dropped", || {
+        publisher.counters().clients_dropped == 1
+    });
+    assert_eq!(bad.next(), None, "the bad client's connection is closed");
+    assert_eq!(publisher.counters().clients_connected, 1);
+
+    publisher.upsert(upsert(5, 1, 3)).unwrap();
+    assert_eq!(good.upsert().object_id, 5);
+}
+
+#[test]
+fn oversize_and_wrong_direction_frames_drop_the_client() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut oversize = UnixStream::connect(&path).unwrap();
+    oversize.write_all(&u32::MAX.to_le_bytes()).unwrap();
+    let mut wrong = UnixStream::connect(&path).unwrap();
+    wrong.write_all(&[1, 0, 0, 0, 0x04]).unwrap(); // SnapshotDone is a server kind
+    wait_until("both dropped", || publisher.counters().clients_dropped == 2);
+}
+
+#[test]
+fn newer_upsert_replaces_an_unsent_older_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![]);
+    // Object 1 is larger than the socket buffers, so the writer is stuck on it while the client
+    // does not read; object 2 meanwhile gets three versions.
+    publisher.upsert(upsert(1, 1, 200_000)).unwrap();
+    std::thread::sleep(Duration::from_millis(50));
+    for version in 1..=3 {
+        publisher.upsert(upsert(2, version, 3)).unwrap();
+    }
+    assert_eq!(client.upsert().object_id, 1);
+    let latest = client.upsert();
+    assert_eq!((latest.object_id, latest.version), (2, 3));
+
+    // A remove cancels an unsent upsert of the same object.
+    publisher.upsert(upsert(3, 1, 200_000)).unwrap();
+    std::thread::sleep(Duration::from_millis(50));
+    publisher.upsert(upsert(4, 1, 3)).unwrap();
+    publisher.remove(4);
+    assert_eq!(client.upsert().object_id, 3);
+    assert_eq!(client.expect(), Message::Remove { object_id: 4 });
+}
+
+#[test]
+fn older_version_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let publisher = publisher(&socket_in(&dir));
+    publisher.upsert(upsert(1, 2, 3)).unwrap();
+    assert!(matches!(
+        publisher.upsert(upsert(1, 2, 3)),
+        Err(PublishError::VersionNotNewer { current: 2, .. })
+    ));
+}
+
+#[test]
+fn stale_socket_is_removed_and_bind_succeeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    drop(UnixListener::bind(&path).unwrap()); // leaves the file, nobody listening
+    assert!(path.exists());
+    let _publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+}
+
+#[test]
+fn live_publisher_makes_second_bind_fail() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let first = publisher(&path);
+    let error = Publisher::bind(PublisherConfig::new(&path)).unwrap_err();
+    assert!(
+        matches!(&error, PublishError::AlreadyRunning { path: p } if p == &path),
+        "{error}"
+    );
+    assert!(error
+        .to_string()
+        .contains("another tacmesh daemon is serving"));
+    // The first one is untouched.
+    first.upsert(upsert(1, 1, 3)).unwrap();
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![(1, 1)]);
+}
+
+#[test]
+fn regular_file_at_path_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    std::fs::write(&path, b"not a socket").unwrap();
+    let error = Publisher::bind(PublisherConfig::new(&path)).unwrap_err();
+    assert!(matches!(error, PublishError::NotASocket { .. }), "{error}");
+    assert_eq!(std::fs::read(&path).unwrap(), b"not a socket");
+}
+
+#[test]
+fn missing_directory_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nope").join("tacmesh.sock");
+    let error = Publisher::bind(PublisherConfig::new(&path)).unwrap_err();
+    assert!(matches!(error, PublishError::NoSocketDir { .. }), "{error}");
+}
+
+#[test]
+fn socket_file_mode_follows_config() {
+    let dir = tempfile::tempdir().unwrap();
+    for mode in [0o660, 0o600] {
+        let path = dir.path().join(format!("m{mode:o}.sock"));
+        let mut config = PublisherConfig::new(&path);
+        config.mode = mode;
+        let _publisher = Publisher::bind(config).unwrap();
+        let actual = std::fs::metadata(&path).unwrap().permissions().mode() & 0o7777;
+        assert_eq!(actual, mode);
+    }
+    assert_eq!(PublisherConfig::new("x").mode, 0o660);
+}
+
+#[test]
+fn shutdown_sends_goodbye_and_removes_the_socket() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let mut publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    client.snapshot();
+    let _stalled = UnixStream::connect(&path).unwrap();
+    wait_until("both clients registered", || {
+        publisher.counters().clients_connected == 2
+    });
+    // The stalled client's writer is blocked in the middle of a mesh larger than its socket
+    // buffer; the reading client takes the mesh.
+    publisher.upsert(upsert(1, 1, 200_000)).unwrap();
+    assert_eq!(client.upsert().object_id, 1);
+    let start = Instant::now();
+    publisher.shutdown("SIGTERM received");
+    assert!(
+        start.elapsed() < crate::GOODBYE_GRACE + Duration::from_secs(1),
+        "shutdown took {:?}",
+        start.elapsed()
+    );
+    assert_eq!(
+        client.expect(),
+        Message::Goodbye {
+            reason: "SIGTERM received".into()
+        }
+    );
+    assert_eq!(client.next(), None);
+    assert!(!path.exists());
+    assert_eq!(publisher.counters().clients_connected, 0);
+}
+
+#[test]
+fn drop_removes_the_socket() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    drop(publisher(&path));
+    assert!(!path.exists());
+}
+
+#[test]
+fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let write_timeout = Duration::from_millis(300);
+    let mut config = PublisherConfig::new(&path);
+    config.server_name = "tacmesh-test".into();
+    let publisher = Publisher::bind_with_write_timeout(config, write_timeout).unwrap();
+    let _stalled = UnixStream::connect(&path).unwrap(); // never reads
+    let mut reader = TestClient::connect(&path);
+    reader.hello();
+    reader.snapshot();
+    wait_until("the client registered", || {
+        publisher.counters().clients_connected == 2
+    });
+    // The other client reads all the time (with this short timeout it must).
+    let receive =
+        std::thread::spawn(move || [reader.upsert().object_id, reader.upsert().object_id]);
+    publisher.upsert(upsert(1, 1, 200_000)).unwrap(); // far more than a socket buffer
+    let started = Instant::now();
+    let deadline = started + 2 * write_timeout + WAIT;
+    while publisher.counters().clients_dropped == 0 {
+        assert!(
+            Instant::now() < deadline,
+            "the stalled client was never dropped"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(started.elapsed() >= write_timeout);
+    assert_eq!(publisher.counters().clients_connected, 1);
+    // The reading client is still served.
+    publisher.upsert(upsert(2, 1, 3)).unwrap();
+    assert_eq!(receive.join().unwrap(), [1, 2]);
+    assert_eq!(publisher.counters().clients_dropped, 1);
+}
