@@ -1,0 +1,582 @@
+//! Segmentation of one point cloud into support planes and objects: the tabletop pipeline of
+//! Rusu ("Semantic 3D object maps for everyday manipulation in human living environments", 2009,
+//! §6) and PCL's tabletop tutorials, without tracking across frames.
+//!
+//! Entry points:
+//! - [`segment`]: points (non-finite ones allowed) and a [`SegmentConfig`] to a
+//!   [`Segmentation`]: the support planes, the objects, and one label per input point.
+//! - [`segment_cloud`]: the same for a [`PointCloud`].
+//! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
+//!
+//! Pipeline, one file per stage, in order:
+//! 1. `planes.rs`: RANSAC for the largest plane, least-squares refinement, repeated while planes
+//!    are large enough.
+//! 2. Here (`lib.rs`): points just above a plane (within [`SegmentConfig::plane_margin_m`]) go with it,
+//!    points below it (the far side from the sensor) are dropped.
+//! 3. `creases.rs`: each remaining point's depth below its local plane (PCA); points in concave
+//!    creases, where one object stands on or leans against another, are set aside.
+//! 4. `clusters.rs`: Euclidean clustering of the rest on a voxel hash grid, clusters outside a
+//!    size range dropped; then each set-aside point joins the object of its nearest neighbour.
+
+mod clusters;
+mod creases;
+mod grid;
+mod planes;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use tacmesh_source::PointCloud;
+
+pub use planes::SupportPlane;
+
+/// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
+/// tabletop scans at 0.5–2 m in the sensor frame; they were tuned on the labelled mOSD scans
+/// (see `tests/real_data.rs`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentConfig {
+    /// RANSAC inlier distance from a plane, in metres. Default 0.012: Kinect depth noise is
+    /// about 1.5 mm × z², so a table at 2 m is ±6 mm thick, and tilt residue of a slightly
+    /// warped table adds a little.
+    pub plane_distance_m: f32,
+    /// Points above a plane by up to this many metres (beyond `plane_distance_m`) also go with
+    /// the plane rather than with objects: the noisy fringe of the table. Default 0.015.
+    pub plane_margin_m: f32,
+    /// At most this many planes are removed. Default 1 (the table, or the floor).
+    pub max_planes: usize,
+    /// A plane must hold at least this fraction of the finite points. Default 0.1.
+    pub min_plane_fraction: f32,
+    /// Points closer than this, in metres, belong to the same object (unless a concave crease
+    /// separates them, see `max_valley_depth_m`). Default 0.015: about five Kinect pixel
+    /// footprints at 1.5 m, enough to bridge the depth steps of a 0.5–2 m scan.
+    pub cluster_tolerance_m: f32,
+    /// Radius of the neighbourhood a point's local plane is fitted to (for the valley depth), in
+    /// metres; zero turns the crease test off. Default 0.025.
+    pub crease_radius_m: f32,
+    /// Points lying deeper than this, in metres, below the plane fitted to their neighbours
+    /// (within `crease_radius_m`) sit in a concave crease, such as where one object stands on
+    /// another; they do not link clusters and afterwards join their nearest object. Infinity
+    /// turns this off. Default 0.001, tuned on the mOSD stacked cylinders (see
+    /// `tests/real_data.rs`: 0.0007 and 0.0013 already fail there).
+    pub max_valley_depth_m: f32,
+    /// Smaller clusters are noise and are dropped. Default 300 (a 5 cm object at 2 m).
+    pub min_cluster_points: usize,
+    /// Larger clusters are background (walls, furniture) and are dropped. Default 100 000.
+    pub max_cluster_points: usize,
+    /// The sensor position in the points' frame, in metres; plane normals are turned towards
+    /// it. Default the origin (points in the sensor frame).
+    pub viewpoint_m: Vec3,
+    /// Seed of the RANSAC sampling: equal inputs and seeds give equal results. Default 0.
+    pub seed: u64,
+}
+
+impl Default for SegmentConfig {
+    fn default() -> Self {
+        Self {
+            plane_distance_m: 0.012,
+            plane_margin_m: 0.015,
+            max_planes: 1,
+            min_plane_fraction: 0.1,
+            cluster_tolerance_m: 0.015,
+            crease_radius_m: 0.025,
+            max_valley_depth_m: 0.001,
+            min_cluster_points: 300,
+            max_cluster_points: 100_000,
+            viewpoint_m: Vec3::ZERO,
+            seed: 0,
+        }
+    }
+}
+
+/// The result of [`segment`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segmentation {
+    /// Support planes, largest first; each lists its points (RANSAC inliers plus the margin).
+    pub planes: Vec<SupportPlane>,
+    /// Point indices of each object (ascending), largest object first.
+    pub objects: Vec<Vec<u32>>,
+    /// One label per input point: `k` (1-based) for points of `objects[k - 1]`, 0 for plane
+    /// points, unassigned points and non-finite points.
+    pub labels: Vec<u32>,
+}
+
+/// Segments one cloud into support planes and objects (see the crate docs for the method).
+///
+/// Non-finite points are ignored and labelled 0. Never panics; an empty or all-invalid input
+/// gives no planes and no objects.
+pub fn segment(points: &[Vec3], config: &SegmentConfig) -> Segmentation {
+    let finite: Vec<u32> = (0..points.len() as u32)
+        .into_par_iter()
+        .filter(|&i| points[i as usize].is_finite())
+        .collect();
+    let min_plane_points = (config.min_plane_fraction.max(0.0) as f64 * finite.len() as f64).ceil();
+    let mut planes = planes::find_planes(
+        points,
+        &finite,
+        config.plane_distance_m.max(0.0),
+        config.max_planes,
+        min_plane_points.min(usize::MAX as f64) as usize,
+        config.viewpoint_m,
+        config.seed,
+    );
+
+    // Plane fringe and the far side of each plane: assign or drop.
+    let mut taken = vec![false; points.len()];
+    for plane in &planes {
+        for &i in &plane.inliers {
+            taken[i as usize] = true;
+        }
+    }
+    let below_m = -config.plane_distance_m.max(0.0);
+    let above_m = config.plane_distance_m.max(0.0) + config.plane_margin_m.max(0.0);
+    let mut candidates = Vec::with_capacity(finite.len());
+    for &i in &finite {
+        if taken[i as usize] {
+            continue;
+        }
+        let p = points[i as usize];
+        let mut keep = true;
+        for plane in &mut planes {
+            let d = plane.signed_distance_m(p);
+            if d < below_m {
+                keep = false;
+                break;
+            }
+            if d <= above_m {
+                plane.inliers.push(i);
+                keep = false;
+                break;
+            }
+        }
+        if keep {
+            candidates.push(i);
+        }
+    }
+    for plane in &mut planes {
+        plane.inliers.sort_unstable();
+    }
+
+    // Concave creases: points deeper than `max_valley_depth_m` below their local plane do not
+    // link clusters; afterwards each joins the object of its nearest linked neighbour.
+    let use_creases = config.crease_radius_m > 0.0
+        && config.crease_radius_m.is_finite()
+        && config.max_valley_depth_m < f32::INFINITY;
+    let depths = if use_creases {
+        creases::valley_depths(
+            points,
+            &candidates,
+            config.crease_radius_m,
+            config.viewpoint_m,
+        )
+    } else {
+        Vec::new()
+    };
+    let mut core = Vec::with_capacity(candidates.len());
+    let mut valley: Vec<u32> = Vec::new();
+    for (k, &i) in candidates.iter().enumerate() {
+        match depths.get(k) {
+            Some(&depth_m) if depth_m > config.max_valley_depth_m => valley.push(i),
+            _ => core.push(i),
+        }
+    }
+    let mut objects = clusters::euclidean_clusters(
+        points,
+        &core,
+        config.cluster_tolerance_m,
+        config.min_cluster_points.max(1),
+        config.max_cluster_points,
+    );
+    // Creases fill in from their edges: each pass attaches the points next to an object.
+    while !valley.is_empty() {
+        let before = valley.len();
+        valley = attach_to_nearest(points, &mut objects, &valley, config.cluster_tolerance_m);
+        if valley.len() == before {
+            break;
+        }
+    }
+    objects.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
+    let mut labels = vec![0u32; points.len()];
+    for (k, object) in objects.iter().enumerate() {
+        for &i in object {
+            labels[i as usize] = k as u32 + 1;
+        }
+    }
+    Segmentation {
+        planes,
+        objects,
+        labels,
+    }
+}
+
+/// Adds each of `loose` to the object of its nearest object point within `tolerance_m`,
+/// keeping each object's indices ascending, and returns the points left loose.
+fn attach_to_nearest(
+    points: &[Vec3],
+    objects: &mut [Vec<u32>],
+    loose: &[u32],
+    tolerance_m: f32,
+) -> Vec<u32> {
+    if objects.is_empty() || loose.is_empty() || tolerance_m <= 0.0 || !tolerance_m.is_finite() {
+        return loose.to_vec();
+    }
+    let members: Vec<u32> = {
+        let mut all: Vec<u32> = objects.iter().flatten().copied().collect();
+        all.sort_unstable();
+        all
+    };
+    let mut object_of = rustc_hash::FxHashMap::default();
+    for (k, object) in objects.iter().enumerate() {
+        for &i in object {
+            object_of.insert(i, k);
+        }
+    }
+    let grid = grid::VoxelGrid::new(points, &members, tolerance_m);
+    let tolerance_sq = tolerance_m * tolerance_m;
+    let owners: Vec<Option<usize>> = loose
+        .par_iter()
+        .map(|&i| {
+            let p = points[i as usize];
+            let mut best: Option<(f32, u32)> = None;
+            grid.for_each_near(p, |j| {
+                let d = p.distance_squared(points[j as usize]);
+                if d <= tolerance_sq && best.is_none_or(|(bd, bj)| (d, j) < (bd, bj)) {
+                    best = Some((d, j));
+                }
+            });
+            best.map(|(_, j)| object_of[&j])
+        })
+        .collect();
+    let mut still_loose = Vec::new();
+    for (&i, owner) in loose.iter().zip(owners) {
+        match owner {
+            Some(k) => objects[k].push(i),
+            None => still_loose.push(i),
+        }
+    }
+    for object in objects.iter_mut() {
+        object.sort_unstable();
+    }
+    still_loose
+}
+
+/// [`segment`] on the points of a [`PointCloud`] (normals are not used).
+pub fn segment_cloud(cloud: &PointCloud, config: &SegmentConfig) -> Segmentation {
+    segment(&cloud.points, config)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic jitter in ±`amplitude`.
+    fn jitter(k: u32, amplitude: f32) -> f32 {
+        let h = k
+            .wrapping_mul(2_654_435_761)
+            .rotate_left(13)
+            .wrapping_mul(40_503);
+        (h as f32 / u32::MAX as f32 - 0.5) * 2.0 * amplitude
+    }
+
+    /// A 1.2 m × 1 m table at z = 1 m below the sensor (sensor at the origin looking down −z),
+    /// with three objects on it: a box, a sphere and a cylinder. Returns the points and the
+    /// ground-truth object of each (0 for the table).
+    fn tabletop() -> (Vec<Vec3>, Vec<u32>) {
+        let mut points = Vec::new();
+        let mut truth = Vec::new();
+        let mut k = 0u32;
+        let mut push = |p: Vec3, id: u32, points: &mut Vec<Vec3>, truth: &mut Vec<u32>| {
+            k += 1;
+            points.push(p + Vec3::new(0.0, 0.0, jitter(k, 0.002)));
+            truth.push(id);
+        };
+        for i in 0..240 {
+            for j in 0..200 {
+                let p = Vec3::new(-0.6 + i as f32 * 0.005, -0.5 + j as f32 * 0.005, -1.0);
+                push(p, 0, &mut points, &mut truth);
+            }
+        }
+        // Box 10 × 10 × 15 cm at (-0.3, 0): top and four sides.
+        let c = Vec3::new(-0.3, 0.0, -1.0);
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let (u, v) = (-0.05 + i as f32 * 0.005, -0.05 + j as f32 * 0.005);
+                push(c + Vec3::new(u, v, 0.15), 1, &mut points, &mut truth);
+            }
+        }
+        for i in 0..=20 {
+            for h in 1..=30 {
+                let (u, z) = (-0.05 + i as f32 * 0.005, h as f32 * 0.005);
+                for side in [
+                    Vec3::new(u, -0.05, z),
+                    Vec3::new(u, 0.05, z),
+                    Vec3::new(-0.05, u, z),
+                    Vec3::new(0.05, u, z),
+                ] {
+                    push(c + side, 1, &mut points, &mut truth);
+                }
+            }
+        }
+        // Sphere of radius 6 cm resting on the table at (0.1, 0.25).
+        let c = Vec3::new(0.1, 0.25, -1.0 + 0.06);
+        for i in 0..40 {
+            for j in 0..80 {
+                // The part a camera above the table sees.
+                let theta = 0.6 * std::f32::consts::PI * (i as f32 + 0.5) / 40.0;
+                let phi = 2.0 * std::f32::consts::PI * j as f32 / 80.0;
+                let dir = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                );
+                push(c + dir * 0.06, 2, &mut points, &mut truth);
+            }
+        }
+        // Cylinder of radius 4 cm, 12 cm tall, at (0.3, -0.25).
+        let c = Vec3::new(0.3, -0.25, -1.0);
+        for h in 1..=24 {
+            for j in 0..60 {
+                let phi = 2.0 * std::f32::consts::PI * j as f32 / 60.0;
+                push(
+                    c + Vec3::new(0.04 * phi.cos(), 0.04 * phi.sin(), h as f32 * 0.005),
+                    3,
+                    &mut points,
+                    &mut truth,
+                );
+            }
+        }
+        (points, truth)
+    }
+
+    #[test]
+    fn segment_finds_table_and_three_objects() {
+        let (points, truth) = tabletop();
+        let seg = segment(&points, &SegmentConfig::default());
+        assert_eq!(seg.planes.len(), 1);
+        let plane = &seg.planes[0];
+        assert!(
+            plane.normal.dot(Vec3::Z) > 0.999,
+            "normal {:?}",
+            plane.normal
+        );
+        // The bottom rows of the objects pull the least-squares fit up by a few millimetres.
+        assert!(
+            (plane.offset_m + 1.0).abs() < 0.006,
+            "offset {}",
+            plane.offset_m
+        );
+        assert_eq!(seg.objects.len(), 3);
+        // Each object is exactly one true object, minus its bottom fringe (within plane distance + margin of the table).
+        for object in &seg.objects {
+            let id = truth[object[0] as usize];
+            assert!(id > 0);
+            assert!(object.iter().all(|&i| truth[i as usize] == id));
+            let missing = (0..points.len() as u32)
+                .filter(|&i| truth[i as usize] == id && points[i as usize].z > -1.0 + 0.04)
+                .filter(|i| object.binary_search(i).is_err())
+                .count();
+            assert_eq!(
+                missing, 0,
+                "object {id} misses points more than 4 cm above the table"
+            );
+        }
+        // Largest first, each true object once.
+        assert!(seg.objects.windows(2).all(|w| w[0].len() >= w[1].len()));
+        let mut ids: Vec<u32> = seg.objects.iter().map(|o| truth[o[0] as usize]).collect();
+        ids.sort_unstable();
+        assert_eq!(ids, vec![1, 2, 3]);
+        for (i, &label) in seg.labels.iter().enumerate() {
+            if label > 0 {
+                assert!(seg.objects[label as usize - 1]
+                    .binary_search(&(i as u32))
+                    .is_ok());
+            }
+        }
+        // The outline is the table's rectangle.
+        let outline = plane.outline();
+        assert_eq!(outline.len(), 4, "{outline:?}");
+        for c in outline {
+            assert!(
+                (c.x.abs() - 0.6).abs() < 0.01 || (c.x - 0.595).abs() < 0.01,
+                "{c}"
+            );
+            assert!((c.z + 1.0).abs() < 0.003);
+        }
+    }
+
+    /// Points on the top and sides of an axis-aligned box (corner `lo`, size `size`) every
+    /// `step`: the x-min and y-min sides, which a sensor at the origin sees when the box lies
+    /// at positive x and y below it, and the other two if `all_sides`. Top points for which
+    /// `hidden` holds are left out.
+    fn box_faces(
+        lo: Vec3,
+        size: Vec3,
+        step: f32,
+        all_sides: bool,
+        hidden: impl Fn(Vec3) -> bool,
+    ) -> Vec<Vec3> {
+        let n = |len: f32| (len / step).round() as i32;
+        let mut points = Vec::new();
+        for i in 0..=n(size.x) {
+            for j in 0..=n(size.y) {
+                let p = lo + Vec3::new(i as f32 * step, j as f32 * step, size.z);
+                if !hidden(p) {
+                    points.push(p);
+                }
+            }
+        }
+        for h in 0..n(size.z) {
+            let z = h as f32 * step;
+            for i in 0..=n(size.x) {
+                points.push(lo + Vec3::new(i as f32 * step, 0.0, z));
+                if all_sides {
+                    points.push(lo + Vec3::new(i as f32 * step, size.y, z));
+                }
+            }
+            for j in 0..=n(size.y) {
+                points.push(lo + Vec3::new(0.0, j as f32 * step, z));
+                if all_sides {
+                    points.push(lo + Vec3::new(size.x, j as f32 * step, z));
+                }
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn segment_separates_a_box_standing_on_a_box() {
+        // Table at z = -1; a 24 × 24 × 10 cm box, and a 10 × 10 × 10 cm box on its middle
+        // (with all four sides, so that its base meets the big top all round).
+        let mut points = Vec::new();
+        for i in 0..200 {
+            for j in 0..200 {
+                points.push(Vec3::new(
+                    -0.2 + i as f32 * 0.005,
+                    -0.2 + j as f32 * 0.005,
+                    -1.0,
+                ));
+            }
+        }
+        let table = points.len();
+        let under_small = |p: Vec3| (0.27..=0.37).contains(&p.x) && (0.27..=0.37).contains(&p.y);
+        points.extend(box_faces(
+            Vec3::new(0.2, 0.2, -1.0),
+            Vec3::new(0.24, 0.24, 0.1),
+            0.004,
+            false,
+            under_small,
+        ));
+        let bottom = points.len();
+        points.extend(box_faces(
+            Vec3::new(0.27, 0.27, -0.9),
+            Vec3::new(0.1, 0.1, 0.1),
+            0.004,
+            true,
+            |_| false,
+        ));
+        let seg = segment(&points, &SegmentConfig::default());
+        assert_eq!(
+            seg.objects.len(),
+            2,
+            "{:?}",
+            seg.objects.iter().map(Vec::len).collect::<Vec<_>>()
+        );
+        // Each object is (almost all) one box. Crease points join the nearest object, so the
+        // strip of the big top next to the small box (about 5 % of it) goes with the small one.
+        let purity = |object: &[u32], range: std::ops::Range<usize>| {
+            object
+                .iter()
+                .filter(|&&i| range.contains(&(i as usize)))
+                .count() as f32
+                / object.len() as f32
+        };
+        assert!(purity(&seg.objects[0], table..bottom) > 0.93);
+        assert!(purity(&seg.objects[1], bottom..points.len()) > 0.93);
+    }
+
+    #[test]
+    fn segment_without_plane_gives_one_object() {
+        // A sphere of 10 cm radius alone: no plane holds 10 % of it within 12 mm... except its
+        // caps, so ask for big planes only.
+        let mut points = Vec::new();
+        for i in 0..60 {
+            for j in 0..120 {
+                let theta = std::f32::consts::PI * (i as f32 + 0.5) / 60.0;
+                let phi = 2.0 * std::f32::consts::PI * j as f32 / 120.0;
+                points.push(
+                    Vec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.sin() * phi.sin(),
+                        theta.cos(),
+                    ) * 0.1
+                        + Vec3::new(0.0, 0.0, -1.0),
+                );
+            }
+        }
+        let config = SegmentConfig {
+            min_plane_fraction: 0.3,
+            ..SegmentConfig::default()
+        };
+        let seg = segment(&points, &config);
+        assert!(seg.planes.is_empty());
+        assert_eq!(seg.objects.len(), 1);
+        assert_eq!(seg.objects[0].len(), points.len());
+        assert!(seg.labels.iter().all(|&l| l == 1));
+    }
+
+    #[test]
+    fn segment_of_nothing_is_empty() {
+        let seg = segment(&[], &SegmentConfig::default());
+        assert!(seg.planes.is_empty() && seg.objects.is_empty() && seg.labels.is_empty());
+    }
+
+    #[test]
+    fn segment_ignores_non_finite_points() {
+        let points = vec![Vec3::NAN; 1000];
+        let seg = segment(&points, &SegmentConfig::default());
+        assert!(seg.planes.is_empty() && seg.objects.is_empty());
+        assert_eq!(seg.labels, vec![0; 1000]);
+
+        let (mut points, _) = tabletop();
+        for (k, p) in points.iter_mut().enumerate() {
+            if k % 7 == 0 {
+                *p = if k % 2 == 0 {
+                    Vec3::NAN
+                } else {
+                    Vec3::new(f32::INFINITY, 0.0, 0.0)
+                };
+            }
+        }
+        let seg = segment(&points, &SegmentConfig::default());
+        assert_eq!(seg.objects.len(), 3);
+        assert!((0..points.len()).step_by(7).all(|k| seg.labels[k] == 0));
+    }
+
+    #[test]
+    fn segment_is_deterministic_for_a_seed() {
+        let (points, _) = tabletop();
+        let config = SegmentConfig {
+            seed: 42,
+            ..SegmentConfig::default()
+        };
+        let a = segment(&points, &config);
+        let b = segment(&points, &config);
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn segment_drops_points_below_the_plane() {
+        let (mut points, _) = tabletop();
+        let n = points.len();
+        // A blob 30 cm below the table (the floor side, away from the sensor).
+        for k in 0..500 {
+            points.push(Vec3::new(
+                jitter(k, 0.05),
+                jitter(k + 7, 0.05),
+                -1.3 + jitter(k + 13, 0.05),
+            ));
+        }
+        let seg = segment(&points, &SegmentConfig::default());
+        assert_eq!(seg.objects.len(), 3);
+        assert!(seg.labels[n..].iter().all(|&l| l == 0));
+        assert!(seg.planes[0].inliers.iter().all(|&i| (i as usize) < n));
+    }
+}

@@ -1,0 +1,438 @@
+//! Dominant support planes (table, floor) by RANSAC, refined by least squares.
+//!
+//! Method: RANSAC (Fischler & Bolles, "Random sample consensus", CACM 1981) in the form PCL's
+//! `SACSegmentation` with `SACMODEL_PLANE` uses for tabletop scenes (Rusu, "Semantic 3D object
+//! maps for everyday manipulation in human living environments", 2009, §6): sample three points,
+//! count the points within a distance threshold of their plane, keep the plane with most inliers.
+//! The winner is refined by total least squares on its inliers (the plane through their centroid
+//! normal to the smallest principal axis of their covariance, found with cyclic Jacobi
+//! rotations), the inliers recomputed, and refined once more. Repeated on what is left for up to
+//! `max_planes` planes while a plane holds at least `min_plane_fraction` of the finite points.
+//!
+//! Hypotheses are scored on a fixed random subset of the candidates (at most
+//! [`SCORE_SAMPLE`] points), which ranks planes as well as the full set for planes large enough
+//! to matter, and in parallel; the sampling is seeded, so the result depends only on the input
+//! and the seed.
+//!
+//! Stages in order: [`XorShift`] (seeded sampling) → `hypothesis` → `score` → `refine`
+//! (`fit_plane`, `jacobi_eigen`) → `outline_on_plane` (Andrew's monotone chain) →
+//! [`find_planes`] (the entry point).
+
+use glam::{DVec3, Vec2, Vec3};
+use rayon::prelude::*;
+
+/// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
+/// candidates, the chance that none of `k` samples is all-inlier is `(1 - w³)^k`: for `w = 0.3`
+/// and `k = 400` that is 2e-5.
+const HYPOTHESES: usize = 400;
+
+/// Hypotheses are scored on at most this many candidates (a fixed random subset).
+const SCORE_SAMPLE: usize = 20_000;
+
+/// A support plane: `normal · p = offset_m` for points `p` on it, with `normal` a unit vector
+/// pointing to the side the sensor (the viewpoint) is on, which is the side objects rest on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupportPlane {
+    /// Unit normal, towards the viewpoint.
+    pub normal: Vec3,
+    /// Signed distance of the plane from the origin along `normal`, in metres.
+    pub offset_m: f32,
+    /// Indices (into the input points) of the points assigned to this plane, ascending.
+    pub inliers: Vec<u32>,
+    /// Convex hull of the inliers projected onto the plane, counter-clockwise about `normal`.
+    outline: Vec<Vec3>,
+}
+
+impl SupportPlane {
+    /// Signed distance of `p` from the plane in metres, positive on the viewpoint side.
+    pub fn signed_distance_m(&self, p: Vec3) -> f32 {
+        self.normal.dot(p) - self.offset_m
+    }
+
+    /// The extent of the plane's inliers: the corners of their 2-D convex hull on the plane, in
+    /// order, counter-clockwise seen from the viewpoint side. A fan from the first corner
+    /// triangulates it (`corners.len() - 2` triangles). Empty if the inliers are degenerate.
+    pub fn outline(&self) -> Vec<Vec3> {
+        self.outline.clone()
+    }
+}
+
+/// Xorshift64* (Vigna, "An experimental exploration of Marsaglia's xorshift generators", 2016):
+/// enough for sampling, and keeps the crate free of a RNG dependency.
+pub(crate) struct XorShift(u64);
+
+impl XorShift {
+    pub(crate) fn new(seed: u64) -> Self {
+        // Mix the seed (splitmix64 finaliser) so that small seeds give unrelated streams, and
+        // avoid the all-zero state.
+        let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        Self(if z == 0 { 1 } else { z })
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Uniform in `0..n` (n > 0), by the multiply-shift method (bias below 2^-32 here).
+    fn below(&mut self, n: usize) -> usize {
+        (((self.next_u64() >> 32) * n as u64) >> 32) as usize
+    }
+}
+
+/// A plane through three points, or `None` if they are (nearly) collinear.
+fn hypothesis(a: Vec3, b: Vec3, c: Vec3) -> Option<(Vec3, f32)> {
+    let n = (b - a).cross(c - a);
+    let len = n.length();
+    // Reject slivers: sine of the smallest angle-ish below ~1e-3 of the edge lengths.
+    let scale = (b - a).length() * (c - a).length();
+    if scale <= 0.0 || len.is_nan() || len <= 1e-3 * scale {
+        return None;
+    }
+    let n = n / len;
+    Some((n, n.dot(a)))
+}
+
+/// Number of `sample` points within `threshold_m` of the plane.
+fn score(points: &[Vec3], sample: &[u32], (n, d): (Vec3, f32), threshold_m: f32) -> usize {
+    sample
+        .iter()
+        .filter(|&&i| (n.dot(points[i as usize]) - d).abs() <= threshold_m)
+        .count()
+}
+
+/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations (Golub & Van Loan,
+/// "Matrix Computations", §8.5). Returns eigenvalues and the matching eigenvectors (columns).
+// The row and column updates of a rotation read as the textbook writes them with indices.
+#[allow(clippy::needless_range_loop)]
+fn jacobi_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..32 {
+        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
+        let diag = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
+        if off <= 1e-30 * diag.max(1e-300) {
+            break;
+        }
+        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
+            if a[p][q].abs() < 1e-300 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            // `signum(0.0)` is 1, so equal diagonals rotate by 45°.
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A ← Jᵀ A J with J the rotation in the (p, q) plane.
+            for k in 0..3 {
+                let akp = a[k][p];
+                let akq = a[k][q];
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let apk = a[p][k];
+                let aqk = a[q][k];
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in &mut v {
+                let vkp = row[p];
+                let vkq = row[q];
+                row[p] = c * vkp - s * vkq;
+                row[q] = s * vkp + c * vkq;
+            }
+        }
+    }
+    let col = |j: usize| DVec3::new(v[0][j], v[1][j], v[2][j]);
+    ([a[0][0], a[1][1], a[2][2]], [col(0), col(1), col(2)])
+}
+
+/// Total-least-squares plane through `indices`: centroid and smallest principal axis.
+/// Sums in f64 around a provisional centre so that far-off clouds keep their precision.
+pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)> {
+    if indices.len() < 3 {
+        return None;
+    }
+    let origin = points[indices[0] as usize].as_dvec3();
+    let mut sum = DVec3::ZERO;
+    for &i in indices {
+        sum += points[i as usize].as_dvec3() - origin;
+    }
+    let mean = sum / indices.len() as f64;
+    let mut c = [[0.0f64; 3]; 3];
+    for &i in indices {
+        let r = points[i as usize].as_dvec3() - origin - mean;
+        let r = r.to_array();
+        for (j, row) in c.iter_mut().enumerate() {
+            for (k, cell) in row.iter_mut().enumerate() {
+                *cell += r[j] * r[k];
+            }
+        }
+    }
+    let (values, vectors) = jacobi_eigen(c);
+    let smallest = (0..3).min_by(|&x, &y| values[x].total_cmp(&values[y]))?;
+    let n = vectors[smallest].normalize_or_zero();
+    if n == DVec3::ZERO {
+        return None;
+    }
+    let centroid = origin + mean;
+    Some((n.as_vec3(), n.dot(centroid) as f32))
+}
+
+/// Candidates within `threshold_m` of the plane.
+fn inliers_of(
+    points: &[Vec3],
+    candidates: &[u32],
+    (n, d): (Vec3, f32),
+    threshold_m: f32,
+) -> Vec<u32> {
+    candidates
+        .par_iter()
+        .copied()
+        .filter(|&i| (n.dot(points[i as usize]) - d).abs() <= threshold_m)
+        .collect()
+}
+
+/// Least-squares refinement: fit, re-collect inliers, three times.
+fn refine(
+    points: &[Vec3],
+    candidates: &[u32],
+    mut plane: (Vec3, f32),
+    threshold_m: f32,
+) -> ((Vec3, f32), Vec<u32>) {
+    let mut inliers = inliers_of(points, candidates, plane, threshold_m);
+    for _ in 0..3 {
+        let Some(fitted) = fit_plane(points, &inliers) else {
+            break;
+        };
+        // Always take the fit, even if it holds a few points fewer: a hypothesis tilted within
+        // the threshold can hold more (the feet of objects) and still be the worse plane.
+        plane = fitted;
+        inliers = inliers_of(points, candidates, fitted, threshold_m);
+    }
+    (plane, inliers)
+}
+
+/// Two unit vectors spanning the plane with normal `n`, right-handed with it.
+fn plane_basis(n: Vec3) -> (Vec3, Vec3) {
+    let u = n.any_orthonormal_vector();
+    (u, n.cross(u))
+}
+
+/// Outline corners closer than this to the chord of their neighbours are dropped, in metres.
+const OUTLINE_TOLERANCE_M: f32 = 0.01;
+
+/// Drops hull corners, flattest first, while one lies within `tolerance_m` of the chord joining
+/// its neighbours (and more than three remain). The polygon stays convex and shrinks by less
+/// than `tolerance_m` per dropped corner. Quadratic in the corners, which are few.
+fn simplify_hull(hull: &mut Vec<Vec2>, tolerance_m: f32) {
+    while hull.len() > 3 {
+        let n = hull.len();
+        let height = |k: usize| {
+            let (a, p, b) = (hull[(k + n - 1) % n], hull[k], hull[(k + 1) % n]);
+            let chord = b - a;
+            let len = chord.length();
+            if len > 0.0 {
+                chord.perp_dot(p - a).abs() / len
+            } else {
+                (p - a).length()
+            }
+        };
+        let Some((k, h)) = (0..n)
+            .map(|k| (k, height(k)))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+        else {
+            break;
+        };
+        if h >= tolerance_m {
+            break;
+        }
+        hull.remove(k);
+    }
+}
+
+/// Convex hull of the inliers projected onto the plane, by Andrew's monotone chain (Andrew,
+/// "Another efficient algorithm for convex hulls in two dimensions", IPL 1979), lifted back to
+/// 3-D, with corners flatter than [`OUTLINE_TOLERANCE_M`] dropped. Counter-clockwise about `n`.
+fn outline_on_plane(points: &[Vec3], inliers: &[u32], n: Vec3, d: f32) -> Vec<Vec3> {
+    let (u, v) = plane_basis(n);
+    let mut flat: Vec<Vec2> = inliers
+        .iter()
+        .map(|&i| {
+            let p = points[i as usize];
+            Vec2::new(u.dot(p), v.dot(p))
+        })
+        .collect();
+    flat.sort_unstable_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    flat.dedup();
+    if flat.len() < 3 {
+        return Vec::new();
+    }
+    let cross = |o: Vec2, a: Vec2, b: Vec2| (a - o).perp_dot(b - o);
+    let mut hull: Vec<Vec2> = Vec::with_capacity(64);
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
+            Box::new(flat.iter())
+        } else {
+            Box::new(flat.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop(); // the last point of each chain starts the other one
+    }
+    simplify_hull(&mut hull, OUTLINE_TOLERANCE_M);
+    if hull.len() < 3 {
+        return Vec::new();
+    }
+    hull.into_iter()
+        .map(|q| u * q.x + v * q.y + n * d)
+        .collect()
+}
+
+/// Finds up to `max_planes` support planes among `candidates` (indices of finite points).
+///
+/// Each plane's `inliers` are the candidates within `threshold_m` of it; a plane is accepted
+/// only if it holds at least `min_inliers` points. Normals are turned towards `viewpoint`.
+/// Returns the planes, largest first; inliers of one plane are not candidates for the next.
+pub(crate) fn find_planes(
+    points: &[Vec3],
+    candidates: &[u32],
+    threshold_m: f32,
+    max_planes: usize,
+    min_inliers: usize,
+    viewpoint: Vec3,
+    seed: u64,
+) -> Vec<SupportPlane> {
+    let mut rng = XorShift::new(seed);
+    let mut remaining: Vec<u32> = candidates.to_vec();
+    let mut planes = Vec::new();
+    let min_inliers = min_inliers.max(3);
+    while planes.len() < max_planes && remaining.len() >= min_inliers {
+        // A fixed random scoring subset (with replacement; duplicates are harmless).
+        let sample: Vec<u32> = if remaining.len() <= SCORE_SAMPLE {
+            remaining.clone()
+        } else {
+            (0..SCORE_SAMPLE)
+                .map(|_| remaining[rng.below(remaining.len())])
+                .collect()
+        };
+        // Draw all hypotheses first (sequential, seeded), then score them in parallel.
+        let hypotheses: Vec<(Vec3, f32)> = (0..HYPOTHESES)
+            .filter_map(|_| {
+                let pick =
+                    |rng: &mut XorShift| points[remaining[rng.below(remaining.len())] as usize];
+                hypothesis(pick(&mut rng), pick(&mut rng), pick(&mut rng))
+            })
+            .collect();
+        let best = hypotheses
+            .par_iter()
+            .enumerate()
+            .map(|(k, &h)| (score(points, &sample, h, threshold_m), k))
+            // Ties go to the earliest hypothesis so that the result is deterministic.
+            .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
+        let Some((_, k)) = best else { break };
+        let ((mut n, mut d), inliers) = refine(points, &remaining, hypotheses[k], threshold_m);
+        if inliers.len() < min_inliers {
+            break;
+        }
+        if n.dot(viewpoint) - d < 0.0 {
+            n = -n;
+            d = -d;
+        }
+        let outline = outline_on_plane(points, &inliers, n, d);
+        remaining = difference(&remaining, &inliers);
+        planes.push(SupportPlane {
+            normal: n,
+            offset_m: d,
+            inliers,
+            outline,
+        });
+    }
+    planes
+}
+
+/// `a \ b` for ascending index lists.
+fn difference(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len().saturating_sub(b.len()));
+    let mut j = 0;
+    for &x in a {
+        while j < b.len() && b[j] < x {
+            j += 1;
+        }
+        if j < b.len() && b[j] == x {
+            continue;
+        }
+        out.push(x);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jacobi_finds_smallest_axis_of_flat_covariance() {
+        let c = [[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 0.01]];
+        let (values, vectors) = jacobi_eigen(c);
+        let k = (0..3)
+            .min_by(|&x, &y| values[x].total_cmp(&values[y]))
+            .unwrap();
+        assert!((values[k] - 0.01).abs() < 1e-12);
+        assert!(vectors[k].z.abs() > 0.999_999);
+    }
+
+    #[test]
+    fn fit_plane_recovers_a_tilted_plane() {
+        let n = Vec3::new(0.3, -0.2, 1.0).normalize();
+        let (u, v) = plane_basis(n);
+        let mut points = Vec::new();
+        for i in 0..50 {
+            for j in 0..40 {
+                points.push(u * (i as f32 * 0.02) + v * (j as f32 * 0.03) + n * 0.7);
+            }
+        }
+        let all: Vec<u32> = (0..points.len() as u32).collect();
+        let (m, d) = fit_plane(&points, &all).unwrap();
+        let (m, d) = if m.dot(n) < 0.0 { (-m, -d) } else { (m, d) };
+        assert!(m.dot(n) > 0.999_99, "{m} vs {n}");
+        assert!((d - 0.7).abs() < 1e-4, "{d}");
+    }
+
+    #[test]
+    fn outline_of_square_grid_is_its_four_corners() {
+        let mut points = Vec::new();
+        for i in 0..=10 {
+            for j in 0..=10 {
+                points.push(Vec3::new(i as f32 * 0.1, j as f32 * 0.1, 0.5));
+            }
+        }
+        let inliers: Vec<u32> = (0..points.len() as u32).collect();
+        let hull = outline_on_plane(&points, &inliers, Vec3::Z, 0.5);
+        assert_eq!(hull.len(), 4, "{hull:?}");
+        for c in &hull {
+            assert!((c.z - 0.5).abs() < 1e-6);
+            assert!(
+                (c.x.abs() < 1e-5 || (c.x - 1.0).abs() < 1e-5)
+                    && (c.y.abs() < 1e-5 || (c.y - 1.0).abs() < 1e-5)
+            );
+        }
+        // Counter-clockwise about +z.
+        let area: f32 = (0..4)
+            .map(|k| hull[k].truncate().perp_dot(hull[(k + 1) % 4].truncate()))
+            .sum();
+        assert!(area > 0.0);
+    }
+}
