@@ -15,11 +15,12 @@
 //! and the seed.
 //!
 //! Stages in order: [`XorShift`] (seeded sampling) → `hypothesis` → `score` → `refine`
-//! (`fit_plane`, `jacobi_eigen`) → `outline_on_plane` (Andrew's monotone chain) →
-//! [`find_planes`] (the entry point).
+//! (`fit_plane`, with the eigen solver of `tacmesh_reconstruct::moments`) → `outline_on_plane`
+//! (Andrew's monotone chain) → [`find_planes`] (the entry point).
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DMat3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
+use tacmesh_reconstruct::moments::smallest_eigenvector;
 
 /// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
 /// candidates, the chance that none of `k` samples is all-inlier is `(1 - w³)^k`: for `w = 0.3`
@@ -106,52 +107,6 @@ fn score(points: &[Vec3], sample: &[u32], (n, d): (Vec3, f32), threshold_m: f32)
         .count()
 }
 
-/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations (Golub & Van Loan,
-/// "Matrix Computations", §8.5). Returns eigenvalues and the matching eigenvectors (columns).
-// The row and column updates of a rotation read as the textbook writes them with indices.
-#[allow(clippy::needless_range_loop)]
-fn jacobi_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _sweep in 0..32 {
-        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
-        let diag = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
-        if off <= 1e-30 * diag.max(1e-300) {
-            break;
-        }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            if a[p][q].abs() < 1e-300 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            // `signum(0.0)` is 1, so equal diagonals rotate by 45°.
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            // A ← Jᵀ A J with J the rotation in the (p, q) plane.
-            for k in 0..3 {
-                let akp = a[k][p];
-                let akq = a[k][q];
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
-            }
-            for k in 0..3 {
-                let apk = a[p][k];
-                let aqk = a[q][k];
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
-            }
-            for row in &mut v {
-                let vkp = row[p];
-                let vkq = row[q];
-                row[p] = c * vkp - s * vkq;
-                row[q] = s * vkp + c * vkq;
-            }
-        }
-    }
-    let col = |j: usize| DVec3::new(v[0][j], v[1][j], v[2][j]);
-    ([a[0][0], a[1][1], a[2][2]], [col(0), col(1), col(2)])
-}
-
 /// Total-least-squares plane through `indices`: centroid and smallest principal axis.
 /// Sums in f64 around a provisional centre so that far-off clouds keep their precision.
 pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)> {
@@ -174,9 +129,7 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
             }
         }
     }
-    let (values, vectors) = jacobi_eigen(c);
-    let smallest = (0..3).min_by(|&x, &y| values[x].total_cmp(&values[y]))?;
-    let n = vectors[smallest].normalize_or_zero();
+    let n = smallest_eigenvector(DMat3::from_cols_array_2d(&c)).normalize_or_zero();
     if n == DVec3::ZERO {
         return None;
     }
@@ -382,17 +335,6 @@ fn difference(a: &[u32], b: &[u32]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn jacobi_finds_smallest_axis_of_flat_covariance() {
-        let c = [[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 0.01]];
-        let (values, vectors) = jacobi_eigen(c);
-        let k = (0..3)
-            .min_by(|&x, &y| values[x].total_cmp(&values[y]))
-            .unwrap();
-        assert!((values[k] - 0.01).abs() < 1e-12);
-        assert!(vectors[k].z.abs() > 0.999_999);
-    }
 
     #[test]
     fn fit_plane_recovers_a_tilted_plane() {
