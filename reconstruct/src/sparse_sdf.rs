@@ -67,11 +67,6 @@ impl SparseSdf {
     pub fn position(&self, ijk: IVec3) -> Vec3 {
         self.origin + ijk.as_vec3() * self.voxel_size_m
     }
-
-    /// The grid corner at or below world point `p` (floor).
-    pub fn corner_below(&self, p: Vec3) -> IVec3 {
-        ((p - self.origin) / self.voxel_size_m).floor().as_ivec3()
-    }
 }
 
 #[cfg(test)]
