@@ -63,43 +63,10 @@ struct Run {
     shape: &'static str,
     noise_mm: f32,
     seed: u64,
-    report: MeshReportJson,
+    report: MeshReport,
     mhe: f64,
     hausdorff: f64,
     single_thread_ms: f64,
-}
-
-#[derive(Clone, serde::Serialize)]
-struct MeshReportJson {
-    recon_faces: usize,
-    faces: usize,
-    max_residual: f32,
-    integrate_ms: f64,
-    normals_ms: f64,
-    orient_ms: f64,
-    distance_ms: f64,
-    marching_cubes_ms: f64,
-    simplify_ms: f64,
-    fit_ms: f64,
-    total_ms: f64,
-}
-
-impl From<&MeshReport> for MeshReportJson {
-    fn from(r: &MeshReport) -> Self {
-        Self {
-            recon_faces: r.recon_faces,
-            faces: r.faces,
-            max_residual: r.max_residual,
-            integrate_ms: r.integrate_ms,
-            normals_ms: r.normals_ms,
-            orient_ms: r.orient_ms,
-            distance_ms: r.distance_ms,
-            marching_cubes_ms: r.marching_cubes_ms,
-            simplify_ms: r.simplify_ms,
-            fit_ms: r.fit_ms,
-            total_ms: r.total_ms,
-        }
-    }
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -145,7 +112,7 @@ fn measure(
         shape: shape.name(),
         noise_mm,
         seed,
-        report: MeshReportJson::from(&report),
+        report,
         mhe: d.mhe_m,
         hausdorff: d.hausdorff_m,
         single_thread_ms,
