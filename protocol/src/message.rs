@@ -135,9 +135,9 @@ pub struct Upsert {
     pub object_id: u64,
     /// Grows with every new mesh of this object; a client keeps the highest it has seen.
     pub version: u64,
-    /// Capture time, in nanoseconds on the daemon's monotonic clock, of the newest depth frame
-    /// that contributed to this mesh. The zero point is the daemon's: only differences between
-    /// values from one daemon run mean anything to a client.
+    /// Capture time, in nanoseconds on the host's `CLOCK_MONOTONIC`
+    /// ([`tacmesh_source::monotonic_now`]), of the newest depth frame that contributed to this
+    /// mesh. A client on the same host subtracts it from its own monotonic now for the age.
     pub capture_time_ns: u64,
     /// Vertices in metres (world frame), triangles counter-clockwise seen from outside. Every
     /// coordinate is finite and every index is below the vertex count.

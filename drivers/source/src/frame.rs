@@ -29,7 +29,7 @@ pub struct DepthFrame {
     pub depth_m: Vec<f32>,
     /// Pose of the sensor in the world frame.
     pub world_from_sensor: Affine3A,
-    /// Capture time on the daemon's monotonic clock.
+    /// Capture time on the host's monotonic clock ([`crate::monotonic_now`]).
     pub capture_time: Duration,
 }
 

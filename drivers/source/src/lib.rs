@@ -5,15 +5,18 @@
 //! - [`DepthFrame`] with its [`Intrinsics`]: one organised depth image from a camera.
 //! - [`PointCloud`]: points (and optional normals) in metres, in one named frame.
 //! - [`TriMesh`]: an indexed triangle mesh in metres.
+//! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read.
 //!
 //! This crate is a leaf: backends, the simulator and the daemon depend on it, it depends on
 //! nothing of theirs.
 
+mod clock;
 mod cloud;
 mod frame;
 mod mesh;
 mod source;
 
+pub use clock::monotonic_now;
 pub use cloud::PointCloud;
 pub use frame::{Deprojection, DepthFrame, Intrinsics};
 pub use mesh::TriMesh;
