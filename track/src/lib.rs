@@ -1,0 +1,1 @@
+//! Object identity across frames and per-object incremental fusion (work in progress).
