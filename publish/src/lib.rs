@@ -202,8 +202,8 @@ pub struct Publisher {
     path: PathBuf,
     /// (device, inode) of the socket file we bound, so that shutdown removes only our own file.
     file_id: Option<(u64, u64)>,
-    accept: Option<JoinHandle<()>>,
-    shut_down: bool,
+    accept: Mutex<Option<JoinHandle<()>>>,
+    shut_down: std::sync::atomic::AtomicBool,
 }
 
 impl std::fmt::Debug for Publisher {
@@ -268,8 +268,8 @@ impl Publisher {
             shared,
             path: config.socket_path,
             file_id: bound.file_id,
-            accept: Some(accept),
-            shut_down: false,
+            accept: Mutex::new(Some(accept)),
+            shut_down: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -361,11 +361,12 @@ impl Publisher {
     /// them to take it), closes their connections, stops every thread and removes the socket
     /// file. Unsent updates are discarded. Calling it again does nothing; dropping the publisher
     /// calls it if it was not called.
-    pub fn shutdown(&mut self, reason: &str) {
-        if self.shut_down {
+    /// Takes `&self` so that a publisher shared between threads (in an `Arc`) can be shut down
+    /// by whichever thread stops the daemon.
+    pub fn shutdown(&self, reason: &str) {
+        if self.shut_down.swap(true, Ordering::SeqCst) {
             return;
         }
-        self.shut_down = true;
 
         let mut goodbye = Vec::new();
         let reason_capped = cap_at_char_boundary(reason, MAX_REASON_BYTES);
@@ -408,7 +409,7 @@ impl Publisher {
         for handle in handles.drain(..) {
             let _ = handle.join();
         }
-        if let Some(accept) = self.accept.take() {
+        if let Some(accept) = lock(&self.accept).take() {
             if woke_accept || accept.is_finished() {
                 let _ = accept.join();
             }

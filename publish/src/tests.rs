@@ -378,7 +378,7 @@ fn socket_file_mode_follows_config() {
 fn shutdown_sends_goodbye_and_removes_the_socket() {
     let dir = tempfile::tempdir().unwrap();
     let path = socket_in(&dir);
-    let mut publisher = publisher(&path);
+    let publisher = publisher(&path);
     let mut client = TestClient::connect(&path);
     client.hello();
     client.snapshot();

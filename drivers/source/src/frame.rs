@@ -70,6 +70,31 @@ impl DepthFrame {
         }
         out
     }
+
+    /// As [`deproject`](Self::deproject), but organised: one entry per pixel, row-major, with
+    /// `Vec3::NAN` where the pixel has no usable reading (counted in `invalid_pixels`). The
+    /// daemon keeps pixel positions to segment a strided sub-image and label the rest.
+    pub fn deproject_organised(&self, max_range_m: f32) -> Deprojection {
+        let Intrinsics { width, height, .. } = self.intrinsics;
+        let pixels = width as usize * height as usize;
+        let mut out = Deprojection {
+            points_in_world: Vec::with_capacity(pixels),
+            invalid_pixels: 0,
+        };
+        for i in 0..pixels {
+            let z = self.depth_m.get(i).copied().unwrap_or(f32::NAN);
+            if !(z > 0.0 && z <= max_range_m) {
+                out.invalid_pixels += 1;
+                out.points_in_world.push(Vec3::NAN);
+                continue;
+            }
+            let (u, v) = ((i % width as usize) as f32, (i / width as usize) as f32);
+            let p_in_sensor = self.intrinsics.ray(u, v) * z;
+            out.points_in_world
+                .push(self.world_from_sensor.transform_point3(p_in_sensor));
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -98,6 +123,15 @@ mod tests {
         assert_eq!(d.invalid_pixels, 3);
         // Pixel (0, 1) at 2 m: x = (0 - 0.5) / 2 * 2, y = (1 - 0.5) / 2 * 2, then +1 m in z.
         assert_eq!(d.points_in_world, vec![Vec3::new(-0.5, 0.5, 3.0)]);
+    }
+
+    #[test]
+    fn organised_deprojection_keeps_pixel_positions() {
+        let d = frame(vec![0.0, f32::NAN, 2.0]).deproject_organised(5.0);
+        assert_eq!(d.invalid_pixels, 3);
+        assert_eq!(d.points_in_world.len(), 4);
+        assert!(d.points_in_world[0].is_nan() && d.points_in_world[3].is_nan());
+        assert_eq!(d.points_in_world[2], Vec3::new(-0.5, 0.5, 3.0));
     }
 
     #[test]
