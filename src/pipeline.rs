@@ -1,12 +1,15 @@
 //! One point cloud to one small mesh: reconstruct (normals → signed distance → marching cubes),
 //! then simplify until the maximum residual would pass its bound.
 //!
-//! Entry point: [`mesh_cloud`].
+//! Entry points: [`mesh_cloud`] for a cloud, [`mesh_fused_grid`] for the daemon's fused state.
 
 use std::time::Instant;
 
 use serde::Serialize;
-use tacmesh_reconstruct::surface::{reconstruct_surface, Orientation, ReconstructConfig};
+use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tacmesh_reconstruct::surface::{
+    mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig,
+};
 use tacmesh_simplify::{fit_to_samples, simplify, FitConfig, SimplifyConfig, WeightedSample};
 use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
 
@@ -148,10 +151,67 @@ pub fn mesh_cloud_with_dense(
     };
     // Reconstruction skips non-finite points itself (and counts the rest).
     let (dense, grid, recon) = reconstruct_surface(cloud, &recon_config)?;
+    let (mesh, mut report) = simplify_and_fit(&dense, &grid, max_residual_m, config.fit_to_data)?;
+    report.points = recon.points;
+    report.extent_m = extent_m;
+    report.voxel_size_m = voxel_size_m;
+    report.recon_faces = recon.faces;
+    report.integrate_ms = recon.integrate_ms;
+    report.normals_ms = recon.normals_ms;
+    report.orient_ms = recon.orient_ms;
+    report.distance_ms = recon.distance_ms;
+    report.marching_cubes_ms = recon.marching_cubes_ms;
+    report.total_ms = start.elapsed().as_secs_f64() * 1e3;
+    tracing::debug!(?report, "meshed cloud");
+    Ok((dense, mesh, report))
+}
 
+/// Meshes an already fused moment grid (the daemon's per-object state) in its own frame: the
+/// same stages as [`mesh_cloud`] after integration. `viewpoint` is the sensor position in the
+/// grid's frame, when all the data came from one side; `None` orients by propagation.
+pub fn mesh_fused_grid(
+    grid: &MomentGrid,
+    viewpoint: Option<Vec3>,
+    max_residual_m: f32,
+    fit_to_data: bool,
+) -> Result<(TriMesh, MeshReport), PipelineError> {
+    let start = Instant::now();
+    let recon_config = ReconstructConfig {
+        orientation: match viewpoint {
+            Some(v) => Orientation::TowardsViewpoint(v),
+            None => Orientation::Propagate,
+        },
+        ..ReconstructConfig::with_voxel_size(grid.voxel_size_m())
+    };
+    let (dense, recon) = mesh_moment_grid(grid, &recon_config)?;
+    let (mesh, mut report) = simplify_and_fit(&dense, grid, max_residual_m, fit_to_data)?;
+    report.points = grid
+        .sorted_cells()
+        .into_iter()
+        .filter_map(|cell| grid.get(cell))
+        .map(|m| m.count as usize)
+        .sum();
+    report.voxel_size_m = grid.voxel_size_m();
+    report.recon_faces = recon.faces;
+    report.normals_ms = recon.normals_ms;
+    report.orient_ms = recon.orient_ms;
+    report.distance_ms = recon.distance_ms;
+    report.marching_cubes_ms = recon.marching_cubes_ms;
+    report.total_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok((mesh, report))
+}
+
+/// Simplifies the marching-cubes mesh `dense` under `max_residual_m`, then (optionally) fits
+/// the result to the voxel centroids of `grid`. Fills the simplify and fit fields of the report.
+fn simplify_and_fit(
+    dense: &TriMesh,
+    grid: &MomentGrid,
+    max_residual_m: f32,
+    fit_to_data: bool,
+) -> Result<(TriMesh, MeshReport), PipelineError> {
     let simplify_start = Instant::now();
     let (mut mesh, simplified) = simplify(
-        &dense,
+        dense,
         &SimplifyConfig {
             max_residual_m,
             ..SimplifyConfig::default()
@@ -160,7 +220,7 @@ pub fn mesh_cloud_with_dense(
     let simplify_ms = simplify_start.elapsed().as_secs_f64() * 1e3;
 
     let fit_start = Instant::now();
-    let fit = if config.fit_to_data {
+    let fit = if fit_to_data {
         // Centroids of voxels twice the marching-cubes size: a quarter of the samples, each
         // the mean of several points, and still far finer than the simplified triangles.
         let coarse = grid.coarsened(2);
@@ -191,28 +251,18 @@ pub fn mesh_cloud_with_dense(
     let fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
 
     let report = MeshReport {
-        points: recon.points,
-        extent_m,
-        voxel_size_m,
         max_residual_bound_m: max_residual_m,
-        recon_faces: recon.faces,
         faces: simplified.faces_out,
         vertices: simplified.vertices_out,
         max_residual: simplified.max_residual_m,
-        integrate_ms: recon.integrate_ms,
-        normals_ms: recon.normals_ms,
-        orient_ms: recon.orient_ms,
-        distance_ms: recon.distance_ms,
-        marching_cubes_ms: recon.marching_cubes_ms,
         simplify_ms,
         fit_rms_before: fit.rms_before_m,
         fit_rms_after: fit.rms_after_m,
         fit_max_move: fit.max_move_m,
         fit_ms,
-        total_ms: start.elapsed().as_secs_f64() * 1e3,
+        ..MeshReport::default()
     };
-    tracing::debug!(?report, "meshed cloud");
-    Ok((dense, mesh, report))
+    Ok((mesh, report))
 }
 
 #[cfg(test)]

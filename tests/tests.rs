@@ -3,5 +3,6 @@
 mod util;
 
 mod cli_errors;
+mod daemon;
 mod offline_pipeline;
 mod real_scans;

@@ -46,6 +46,25 @@ impl MomentGrid {
         added
     }
 
+    /// Adds one point to its voxel and returns the voxel with its moments after the addition,
+    /// or `None` (and no change) for a non-finite point. For callers that follow per-voxel change
+    /// as they fuse (the tracker's dirty marking) without a second look-up.
+    pub fn add_point(&mut self, p: Vec3) -> Option<(IVec3, &PointMoments)> {
+        if !p.is_finite() {
+            return None;
+        }
+        let cell = self.cell_of(p);
+        let moments = self.cells.entry(cell).or_default();
+        moments.add_point(p);
+        Some((cell, moments))
+    }
+
+    /// Occupied voxels with their moments, in hash order (use [`Self::sorted_cells`] where the
+    /// order matters).
+    pub fn iter(&self) -> impl Iterator<Item = (IVec3, &PointMoments)> + '_ {
+        self.cells.iter().map(|(&cell, m)| (cell, m))
+    }
+
     pub fn get(&self, cell: IVec3) -> Option<&PointMoments> {
         self.cells.get(&cell)
     }

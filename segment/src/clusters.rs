@@ -52,9 +52,13 @@ impl UnionFind {
 /// Clusters `candidates` (ascending indices of finite points) into groups chained by steps of
 /// at most `tolerance_m`, keeps those with `min_points..=max_points` points, and returns them
 /// largest first (ties: lowest first index first), each ascending.
+///
+/// `weights[i]`, if `weights` is not empty, is how many input points point `i` stands for (a
+/// voxel cell's centroid stands for the points of its cell); sizes are sums of weights.
 pub(crate) fn euclidean_clusters(
     points: &[Vec3],
     candidates: &[u32],
+    weights: &[u32],
     tolerance_m: f32,
     min_points: usize,
     max_points: usize,
@@ -92,9 +96,20 @@ pub(crate) fn euclidean_clusters(
         }
         clusters[cluster_of_root[root] as usize].push(i);
     }
-    clusters.retain(|c| c.len() >= min_points && c.len() <= max_points);
-    clusters.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
-    clusters
+    let size = |c: &[u32]| -> usize {
+        if weights.is_empty() {
+            c.len()
+        } else {
+            c.iter().map(|&i| weights[i as usize] as usize).sum()
+        }
+    };
+    let mut sized: Vec<(usize, Vec<u32>)> = clusters
+        .into_iter()
+        .map(|c| (size(&c), c))
+        .filter(|(n, _)| (min_points..=max_points).contains(n))
+        .collect();
+    sized.sort_by(|a, b| b.0.cmp(&a.0).then(a.1[0].cmp(&b.1[0])));
+    sized.into_iter().map(|(_, c)| c).collect()
 }
 
 #[cfg(test)]
@@ -109,7 +124,7 @@ mod tests {
             .collect();
         points.extend((0..5).map(|k| Vec3::new(0.14 + k as f32 * 0.01, 0.0, 0.0)));
         let all: Vec<u32> = (0..points.len() as u32).collect();
-        let clusters = euclidean_clusters(&points, &all, 0.02, 1, usize::MAX);
+        let clusters = euclidean_clusters(&points, &all, &[], 0.02, 1, usize::MAX);
         assert_eq!(
             clusters,
             vec![(0..10).collect::<Vec<u32>>(), (10..15).collect()]
@@ -125,7 +140,7 @@ mod tests {
             .collect();
         let all: Vec<u32> = (0..points.len() as u32).collect();
         assert_eq!(
-            euclidean_clusters(&points, &all, 0.02, 1, usize::MAX).len(),
+            euclidean_clusters(&points, &all, &[], 0.02, 1, usize::MAX).len(),
             1
         );
     }
@@ -138,7 +153,7 @@ mod tests {
         points.extend((0..50).map(|k| Vec3::new(1.0 + k as f32 * 0.01, 0.0, 0.0)));
         points.extend((0..10).map(|k| Vec3::new(3.0 + k as f32 * 0.01, 0.0, 0.0)));
         let all: Vec<u32> = (0..points.len() as u32).collect();
-        let clusters = euclidean_clusters(&points, &all, 0.02, 5, 20);
+        let clusters = euclidean_clusters(&points, &all, &[], 0.02, 5, 20);
         assert_eq!(clusters, vec![(53..63).collect::<Vec<u32>>()]);
     }
 }

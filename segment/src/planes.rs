@@ -99,11 +99,13 @@ fn hypothesis(a: Vec3, b: Vec3, c: Vec3) -> Option<(Vec3, f32)> {
     Some((n, n.dot(a)))
 }
 
-/// Number of `sample` points within `threshold_m` of the plane.
-fn score(points: &[Vec3], sample: &[u32], (n, d): (Vec3, f32), threshold_m: f32) -> usize {
+/// Number of `sample` points within `threshold_m` of the plane. The sample is a contiguous copy
+/// of the points (not indices into them): scoring reads it once per hypothesis, and gathering
+/// through random indices every time cost more than the arithmetic.
+fn score(sample: &[Vec3], (n, d): (Vec3, f32), threshold_m: f32) -> usize {
     sample
         .iter()
-        .filter(|&&i| (n.dot(points[i as usize]) - d).abs() <= threshold_m)
+        .filter(|&&p| (n.dot(p) - d).abs() <= threshold_m)
         .count()
 }
 
@@ -259,6 +261,11 @@ fn outline_on_plane(points: &[Vec3], inliers: &[u32], n: Vec3, d: f32) -> Vec<Ve
 /// Each plane's `inliers` are the candidates within `threshold_m` of it; a plane is accepted
 /// only if it holds at least `min_inliers` points. Normals are turned towards `viewpoint`.
 /// Returns the planes, largest first; inliers of one plane are not candidates for the next.
+///
+/// `hints` (e.g. the previous frame's planes) are tried first, in order: a hint whose refined
+/// plane holds at least `min_inliers` points is taken without RANSAC; the others are skipped.
+/// Without hints, or once they are used up, planes come from RANSAC.
+#[allow(clippy::too_many_arguments)] // one per knob of the stage; a struct would only rename them
 pub(crate) fn find_planes(
     points: &[Vec3],
     candidates: &[u32],
@@ -267,18 +274,36 @@ pub(crate) fn find_planes(
     min_inliers: usize,
     viewpoint: Vec3,
     seed: u64,
+    hints: &[(Vec3, f32)],
 ) -> Vec<SupportPlane> {
     let mut rng = XorShift::new(seed);
     let mut remaining: Vec<u32> = candidates.to_vec();
     let mut planes = Vec::new();
     let min_inliers = min_inliers.max(3);
+    let mut hints = hints.iter();
     while planes.len() < max_planes && remaining.len() >= min_inliers {
+        // A hint that still holds enough points after refinement saves the RANSAC search.
+        let hinted = hints.by_ref().find_map(|&hint| {
+            let (plane, inliers) = refine(points, &remaining, hint, threshold_m);
+            (inliers.len() >= min_inliers).then_some((plane, inliers))
+        });
+        if let Some(((n, d), inliers)) = hinted {
+            push_plane(
+                &mut planes,
+                &mut remaining,
+                points,
+                (n, d),
+                inliers,
+                viewpoint,
+            );
+            continue;
+        }
         // A fixed random scoring subset (with replacement; duplicates are harmless).
-        let sample: Vec<u32> = if remaining.len() <= SCORE_SAMPLE {
-            remaining.clone()
+        let sample: Vec<Vec3> = if remaining.len() <= SCORE_SAMPLE {
+            remaining.iter().map(|&i| points[i as usize]).collect()
         } else {
             (0..SCORE_SAMPLE)
-                .map(|_| remaining[rng.below(remaining.len())])
+                .map(|_| points[remaining[rng.below(remaining.len())] as usize])
                 .collect()
         };
         // Draw all hypotheses first (sequential, seeded), then score them in parallel.
@@ -292,28 +317,48 @@ pub(crate) fn find_planes(
         let best = hypotheses
             .par_iter()
             .enumerate()
-            .map(|(k, &h)| (score(points, &sample, h, threshold_m), k))
+            .map(|(k, &h)| (score(&sample, h, threshold_m), k))
             // Ties go to the earliest hypothesis so that the result is deterministic.
             .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
         let Some((_, k)) = best else { break };
-        let ((mut n, mut d), inliers) = refine(points, &remaining, hypotheses[k], threshold_m);
+        let (plane, inliers) = refine(points, &remaining, hypotheses[k], threshold_m);
         if inliers.len() < min_inliers {
             break;
         }
-        if n.dot(viewpoint) - d < 0.0 {
-            n = -n;
-            d = -d;
-        }
-        let outline = outline_on_plane(points, &inliers, n, d);
-        remaining = difference(&remaining, &inliers);
-        planes.push(SupportPlane {
-            normal: n,
-            offset_m: d,
+        push_plane(
+            &mut planes,
+            &mut remaining,
+            points,
+            plane,
             inliers,
-            outline,
-        });
+            viewpoint,
+        );
     }
     planes
+}
+
+/// Accepts a refined plane: turns its normal towards `viewpoint`, outlines it, and removes its
+/// inliers from `remaining`.
+fn push_plane(
+    planes: &mut Vec<SupportPlane>,
+    remaining: &mut Vec<u32>,
+    points: &[Vec3],
+    (mut n, mut d): (Vec3, f32),
+    inliers: Vec<u32>,
+    viewpoint: Vec3,
+) {
+    if n.dot(viewpoint) - d < 0.0 {
+        n = -n;
+        d = -d;
+    }
+    let outline = outline_on_plane(points, &inliers, n, d);
+    *remaining = difference(remaining, &inliers);
+    planes.push(SupportPlane {
+        normal: n,
+        offset_m: d,
+        inliers,
+        outline,
+    });
 }
 
 /// `a \ b` for ascending index lists.

@@ -10,6 +10,13 @@
 //! - [`SurfaceSampler`]: area-weighted Monte-Carlo points on a mesh surface, reproducible from a
 //!   `u64` seed; [`sample_cloud`] with a [`SampleConfig`] adds isotropic Gaussian noise and
 //!   returns the synthetic scan as a [`PointCloud`](tacmesh_source::PointCloud).
+//! - [`SimulatedDepthCamera`]: a depth camera ray casting a scene, as a
+//!   [`DepthSource`](tacmesh_source::DepthSource), with per-frame ground truth
+//!   ([`scene_at`](SimulatedDepthCamera::scene_at),
+//!   [`visible_surface`](SimulatedDepthCamera::visible_surface)).
+//! - [`Scene`] (static) and [`DynamicScene`] (objects with a [`Motion`] along [`Waypoint`]s,
+//!   appearing and leaving, optionally looping); [`SceneFile`] reads both the scene and the
+//!   camera from TOML (`scenes/*.toml` at the workspace root; [`SceneFile::demo`] is embedded).
 //! - [`mesh_distance`]: the symmetric sampled surface distance between two meshes
 //!   ([`MeshDistance::mhe_m`] is the paper's MHE; use [`PAPER_SAMPLES`] per side);
 //!   [`point_to_mesh_distances`] gives the exact unsigned distance from points to a surface.
@@ -19,9 +26,12 @@
 //! Gaussian noise's rare libm calls).
 
 mod depth_camera;
+mod dynamic_scene;
 mod metric;
+mod motion;
 mod sampling;
 mod scene;
+mod scene_file;
 mod shapes;
 
 use glam::Vec3;
@@ -31,12 +41,15 @@ pub use depth_camera::{
     look_at, DepthCameraConfig, DepthCameraError, DepthNoise, SimulatedDepthCamera,
     DEFAULT_INTRINSICS, DEFAULT_VIEW_DISTANCE_M,
 };
+pub use dynamic_scene::{DynamicObject, DynamicScene, DynamicSceneBvh};
 pub use metric::{mesh_distance, point_to_mesh_distances, MeshDistance, PAPER_SAMPLES};
+pub use motion::{Motion, PathMode, Waypoint};
 pub use sampling::{sample_cloud, SampleConfig, SurfaceSampler};
 pub use scene::{
     RayHit, Scene, SceneBvh, SceneError, SceneObject, TABLETOP_OBJECT_EXTENT_M,
     TABLETOP_TABLE_SIDE_M,
 };
+pub use scene_file::{SceneFile, SceneFileError, DEMO_SCENE_TOML};
 pub use shapes::{cone, cube, cylinder, fit_to_extent, torus, uv_sphere, Shape};
 
 /// Why a mesh could not be sampled or measured.

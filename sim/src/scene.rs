@@ -3,17 +3,21 @@
 //! Entry points:
 //! - [`Scene`] / [`SceneObject`]: meshes in their own frames with a `world_from_object` pose and
 //!   an id; [`Scene::tabletop`] is the demo scene (a table and three of the paper's shapes).
-//! - [`Scene::build_bvh`] → [`SceneBvh`]: each object baked into world coordinates with an AABB
-//!   tree over its triangles; [`SceneBvh::cast_ray`] gives the nearest hit and the object it
-//!   belongs to, [`SceneBvh::distance_to_surface`] the exact distance to the nearest surface
-//!   (parry's closest-point query).
+//! - [`Scene::build_bvh`] → [`SceneBvh`]: the scene at one instant with an AABB tree per
+//!   object; [`SceneBvh::cast_ray`] gives the nearest hit and the object it belongs to,
+//!   [`SceneBvh::distance_to_surface`] the exact distance to the nearest surface (parry's
+//!   closest-point query). Moving scenes ([`crate::DynamicScene`]) build the same index.
 //!
 //! One tree per object rather than one merged tree: the table's two huge triangles would
-//! overlap every node of a merged tree, and most rays miss most objects' world boxes, which the
-//! root's slab test rejects at once. Baking the poses into the vertices makes rays need no
-//! transform; a moving object (future work) only rebuilds its own small tree.
+//! overlap every node of a merged tree, and most rays miss most objects' world boxes, which
+//! one slab test rejects at once. A fixed object is baked into world coordinates once, so its
+//! rays need no transform; a moving object keeps its tree in its own frame, built once, and
+//! each instant only poses it: rays that enter its world box are carried into the object frame
+//! by the inverse pose.
 //!
 //! Layout: the public scene types, then the ray-casting tree (triangles → nodes → traversal).
+
+use std::sync::Arc;
 
 use glam::{Affine3A, Vec3};
 use parry3d::query::PointQuery;
@@ -47,6 +51,19 @@ pub enum SceneError {
         #[source]
         source: SimError,
     },
+
+    #[error("scene object {id} cannot move as scripted: {reason}")]
+    BadMotion { id: u32, reason: String },
+
+    #[error("scene object {id} must appear before it leaves and at finite times, got appear_s {appear_s:?} and leave_s {leave_s:?}")]
+    BadPresence {
+        id: u32,
+        appear_s: Option<f32>,
+        leave_s: Option<f32>,
+    },
+
+    #[error("loop_s must be a finite number of seconds > 0 (or absent not to loop), got {loop_s}")]
+    InvalidLoop { loop_s: f32 },
 }
 
 /// Side of the demo table, metres.
@@ -99,42 +116,19 @@ impl Scene {
     /// Indexes the scene for ray casting. Fails if an object's mesh is empty, has an index out
     /// of range or a non-finite vertex (after its pose is applied).
     pub fn build_bvh(&self) -> Result<SceneBvh, SceneError> {
-        let objects = self
-            .objects
-            .iter()
-            .map(|object| {
-                let bad = |source| SceneError::BadObject {
-                    id: object.id,
-                    source,
-                };
-                let world = TriMesh::new(
-                    object
-                        .mesh
-                        .vertices
-                        .iter()
-                        .map(|&p| object.world_from_object.transform_point3(p))
-                        .collect(),
-                    object.mesh.triangles.clone(),
-                );
-                check_mesh(&world).map_err(bad)?;
-                // No flags: no merging, no topology, just the BVH. Without flags parry only
-                // fails on an empty index buffer, which `check_mesh` already rejected.
-                let mesh = ParryTriMesh::new(world.vertices, world.triangles)
-                    .map_err(|_| bad(SimError::EmptyMesh))?;
-                let triangles = (0..mesh.indices().len() as u32)
-                    .map(|t| {
-                        let triangle = mesh.triangle(t);
-                        EdgeTriangle::new([triangle.a, triangle.b, triangle.c])
-                    })
-                    .collect();
-                Ok(IndexedObject {
-                    id: object.id,
-                    rays: TriangleBvh::new(triangles),
-                    mesh,
+        let objects =
+            self.objects
+                .iter()
+                .map(|object| {
+                    let trees = ObjectTrees::baked(&object.mesh, object.world_from_object)
+                        .map_err(|source| SceneError::BadObject {
+                            id: object.id,
+                            source,
+                        })?;
+                    Ok((object.id, Arc::new(trees), Affine3A::IDENTITY))
                 })
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(SceneBvh { objects })
+                .collect::<Result<Vec<_>, SceneError>>()?;
+        Ok(SceneBvh::from_posed(objects))
     }
 }
 
@@ -147,31 +141,161 @@ pub struct RayHit {
     pub time_of_impact: f32,
 }
 
-/// A [`Scene`] in world coordinates with one AABB tree per object.
+/// A scene at one instant, ready for ray casting: one AABB tree per object, either baked into
+/// world coordinates (fixed objects) or in the object's own frame with its pose at that
+/// instant (moving objects; rays are transformed into the object frame).
 #[derive(Debug, Clone)]
 pub struct SceneBvh {
-    objects: Vec<IndexedObject>,
+    objects: Vec<PosedObject>,
 }
 
-#[derive(Debug, Clone)]
-struct IndexedObject {
-    id: u32,
+/// One object's trees in the frame they were built in ("tree frame": the world for a baked
+/// object, the object frame for a moving one). Shared between instants of a moving scene.
+#[derive(Debug)]
+pub(crate) struct ObjectTrees {
     /// For ray casting: our own tree (see [`TriangleBvh`]).
     rays: TriangleBvh,
     /// For closest-point queries: parry's tree.
     mesh: ParryTriMesh,
 }
 
+impl ObjectTrees {
+    /// Checks `mesh` and indexes it with `tree_from_mesh` applied to its vertices (the pose,
+    /// to bake a fixed object into world coordinates; the identity for a moving one).
+    pub(crate) fn baked(mesh: &TriMesh, tree_from_mesh: Affine3A) -> Result<Self, SimError> {
+        let posed = TriMesh::new(
+            mesh.vertices
+                .iter()
+                .map(|&p| tree_from_mesh.transform_point3(p))
+                .collect(),
+            mesh.triangles.clone(),
+        );
+        check_mesh(&posed)?;
+        // No flags: no merging, no topology, just the BVH. Without flags parry only fails on
+        // an empty index buffer, which `check_mesh` already rejected.
+        let mesh =
+            ParryTriMesh::new(posed.vertices, posed.triangles).map_err(|_| SimError::EmptyMesh)?;
+        let triangles = (0..mesh.indices().len() as u32)
+            .map(|t| {
+                let triangle = mesh.triangle(t);
+                EdgeTriangle::new([triangle.a, triangle.b, triangle.c])
+            })
+            .collect();
+        Ok(ObjectTrees {
+            rays: TriangleBvh::new(triangles),
+            mesh,
+        })
+    }
+
+    /// The bounding box of the triangles, in the tree frame.
+    fn bounds(&self) -> (Vec3, Vec3) {
+        let root = &self.rays.nodes[0];
+        (root.lo, root.hi)
+    }
+}
+
+/// [`ObjectTrees`] placed in the world at one instant.
+#[derive(Debug, Clone)]
+struct PosedObject {
+    id: u32,
+    trees: Arc<ObjectTrees>,
+    /// `None` when the trees are already in world coordinates.
+    pose: Option<RigidPose>,
+}
+
+/// The pose of a moving object's trees, with what ray casting needs precomputed.
+#[derive(Debug, Clone, Copy)]
+struct RigidPose {
+    world_from_tree: Affine3A,
+    tree_from_world: Affine3A,
+    /// The tree's bounding box carried into the world (the box of its eight moved corners).
+    world_lo: Vec3,
+    world_hi: Vec3,
+}
+
+impl RigidPose {
+    fn new(world_from_tree: Affine3A, (lo, hi): (Vec3, Vec3)) -> Self {
+        let (world_lo, world_hi) = (0..8)
+            .map(|corner| {
+                let pick = |bit: u32, l: f32, h: f32| if corner & bit == 0 { l } else { h };
+                let p = Vec3::new(
+                    pick(1, lo.x, hi.x),
+                    pick(2, lo.y, hi.y),
+                    pick(4, lo.z, hi.z),
+                );
+                world_from_tree.transform_point3(p)
+            })
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p), hi.max(p))
+            });
+        RigidPose {
+            world_from_tree,
+            tree_from_world: world_from_tree.inverse(),
+            world_lo,
+            world_hi,
+        }
+    }
+}
+
 impl SceneBvh {
+    /// Places shared trees: `(id, trees, world_from_tree)` per object. An identity pose means
+    /// the trees are in world coordinates already; any other must be rigid (rotation and
+    /// translation) for [`distance_to_surface`](Self::distance_to_surface) to be exact.
+    pub(crate) fn from_posed(objects: Vec<(u32, Arc<ObjectTrees>, Affine3A)>) -> Self {
+        let objects = objects
+            .into_iter()
+            .map(|(id, trees, world_from_tree)| {
+                let pose = (world_from_tree != Affine3A::IDENTITY)
+                    .then(|| RigidPose::new(world_from_tree, trees.bounds()));
+                PosedObject { id, trees, pose }
+            })
+            .collect();
+        SceneBvh { objects }
+    }
+
     /// The nearest hit of the ray `origin + t * dir` with `0 <= t < max_time_of_impact` on any
     /// object (both faces of every triangle count), or `None`. `dir` need not be unit length:
     /// `t` is in units of `dir`.
     pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max_time_of_impact: f32) -> Option<RayHit> {
+        self.cast_ray_among(origin, dir, max_time_of_impact, 0..self.objects.len())
+    }
+
+    /// The world bounding box `(lo, hi)` of each object, in index order (for culling).
+    pub(crate) fn world_boxes(&self) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
+        self.objects.iter().map(|object| match &object.pose {
+            None => object.trees.bounds(),
+            Some(pose) => (pose.world_lo, pose.world_hi),
+        })
+    }
+
+    /// As [`cast_ray`](Self::cast_ray), trying only the objects at the given indices (in the
+    /// order of [`world_boxes`](Self::world_boxes)); the caller has culled the others.
+    pub(crate) fn cast_ray_among(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_time_of_impact: f32,
+        candidates: impl IntoIterator<Item = usize>,
+    ) -> Option<RayHit> {
         let inv_dir = dir.recip();
         let mut best: Option<RayHit> = None;
         let mut max_t = max_time_of_impact;
-        for object in &self.objects {
-            if let Some(t) = object.rays.cast_ray(origin, dir, inv_dir, max_t) {
+        for object in candidates.into_iter().map(|i| &self.objects[i]) {
+            let rays = &object.trees.rays;
+            let t = match &object.pose {
+                None => rays.cast_ray(origin, dir, inv_dir, max_t),
+                Some(pose) => {
+                    // Most rays miss most objects: test the world box before transforming.
+                    if slab_entry(origin, inv_dir, pose.world_lo, pose.world_hi, max_t).is_none() {
+                        continue;
+                    }
+                    // An affine map keeps `t`: origin + t·dir maps to origin' + t·dir'.
+                    let origin = pose.tree_from_world.transform_point3(origin);
+                    let dir = pose.tree_from_world.transform_vector3(dir);
+                    rays.cast_ray(origin, dir, dir.recip(), max_t)
+                }
+            };
+            if let Some(t) = t {
                 max_t = t;
                 best = Some(RayHit {
                     object_id: object.id,
@@ -188,9 +312,18 @@ impl SceneBvh {
         self.objects
             .iter()
             .map(|object| {
+                let (p_in_tree, world_from_tree) = match &object.pose {
+                    None => (p_in_world, Affine3A::IDENTITY),
+                    Some(pose) => (
+                        pose.tree_from_world.transform_point3(p_in_world),
+                        pose.world_from_tree,
+                    ),
+                };
                 // `solid = false`: project onto the surface even from inside a closed mesh.
-                let projection = object.mesh.project_local_point(p_in_world, false);
-                projection.point.distance(p_in_world)
+                let projection = object.trees.mesh.project_local_point(p_in_tree, false);
+                world_from_tree
+                    .transform_point3(projection.point)
+                    .distance(p_in_world)
             })
             .fold(f32::INFINITY, f32::min)
     }
@@ -212,6 +345,90 @@ impl SceneBvh {
 
 /// Most triangles in a leaf of [`TriangleBvh`].
 const LEAF_TRIANGLES: usize = 4;
+
+/// Below this depth the tree splits by the surface-area heuristic, deeper by the median (which
+/// bounds the depth, see [`TriangleBvh::cast_ray`]).
+const SAH_MAX_DEPTH: usize = 24;
+
+/// Centroid bins per axis of the binned SAH build.
+const SAH_BINS: usize = 16;
+
+/// Half the surface area of the box `[lo, hi]`.
+fn half_area(lo: Vec3, hi: Vec3) -> f32 {
+    let d = (hi - lo).max(Vec3::ZERO);
+    d.x * d.y + d.y * d.z + d.z * d.x
+}
+
+/// Partitions `triangles` at the cheapest binned surface-area-heuristic split over all three
+/// axes (Wald: "On fast construction of SAH-based bounding volume hierarchies", 2007) and
+/// returns the size of the left part, or `None` if no split separates the centroids.
+fn sah_split(triangles: &mut [EdgeTriangle], c_lo: Vec3, c_hi: Vec3) -> Option<usize> {
+    #[derive(Clone, Copy)]
+    struct Bin {
+        lo: Vec3,
+        hi: Vec3,
+        count: usize,
+    }
+    const EMPTY: Bin = Bin {
+        lo: Vec3::INFINITY,
+        hi: Vec3::NEG_INFINITY,
+        count: 0,
+    };
+    let extent = c_hi - c_lo;
+    let bin_of = |t: &EdgeTriangle, axis: usize| {
+        let f = (t.centroid()[axis] - c_lo[axis]) / extent[axis];
+        ((f * SAH_BINS as f32) as usize).min(SAH_BINS - 1)
+    };
+    let mut best: Option<(f32, usize, usize)> = None;
+    for axis in 0..3 {
+        if extent[axis].is_nan() || extent[axis] <= 0.0 {
+            continue;
+        }
+        let mut bins = [EMPTY; SAH_BINS];
+        for t in triangles.iter() {
+            let bin = &mut bins[bin_of(t, axis)];
+            for p in t.corners() {
+                bin.lo = bin.lo.min(p);
+                bin.hi = bin.hi.max(p);
+            }
+            bin.count += 1;
+        }
+        // Right-to-left sweep: the cost of everything right of each boundary.
+        let mut right_cost = [0.0f32; SAH_BINS];
+        let mut acc = EMPTY;
+        for b in (1..SAH_BINS).rev() {
+            acc.lo = acc.lo.min(bins[b].lo);
+            acc.hi = acc.hi.max(bins[b].hi);
+            acc.count += bins[b].count;
+            right_cost[b] = half_area(acc.lo, acc.hi) * acc.count as f32;
+        }
+        let mut acc = EMPTY;
+        for b in 0..SAH_BINS - 1 {
+            acc.lo = acc.lo.min(bins[b].lo);
+            acc.hi = acc.hi.max(bins[b].hi);
+            acc.count += bins[b].count;
+            if acc.count == 0 || acc.count == triangles.len() {
+                continue;
+            }
+            let cost = half_area(acc.lo, acc.hi) * acc.count as f32 + right_cost[b + 1];
+            if best.is_none_or(|(best_cost, _, _)| cost < best_cost) {
+                best = Some((cost, axis, b));
+            }
+        }
+    }
+    let (_, axis, split_bin) = best?;
+    // Two-pointer partition: bins up to `split_bin` to the left.
+    let (mut i, mut j) = (0, triangles.len());
+    while i < j {
+        if bin_of(&triangles[i], axis) <= split_bin {
+            i += 1;
+        } else {
+            j -= 1;
+            triangles.swap(i, j);
+        }
+    }
+    Some(i)
+}
 
 /// A triangle as a corner and two edges, for Möller–Trumbore ray intersection
 /// (Möller, Trumbore: "Fast, minimum storage ray-triangle intersection", JGT 1997).
@@ -291,12 +508,19 @@ impl TriangleBvh {
             first: 0,
             count: 0,
         });
-        Self::build(&mut nodes, 0, &mut triangles, 0);
+        Self::build(&mut nodes, 0, &mut triangles, 0, 0);
         TriangleBvh { nodes, triangles }
     }
 
-    /// Fills `nodes[node]` for `triangles` (which start at `offset` in the final order).
-    fn build(nodes: &mut Vec<Node>, node: usize, triangles: &mut [EdgeTriangle], offset: u32) {
+    /// Fills `nodes[node]` (at `depth` below the root) for `triangles` (which start at
+    /// `offset` in the final order).
+    fn build(
+        nodes: &mut Vec<Node>,
+        node: usize,
+        triangles: &mut [EdgeTriangle],
+        offset: u32,
+        depth: usize,
+    ) {
         let (lo, hi) = triangles
             .iter()
             .flat_map(EdgeTriangle::corners)
@@ -318,11 +542,22 @@ impl TriangleBvh {
             .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(p), hi.max(p))
             });
-        let axis = (c_hi - c_lo).max_position();
-        let mid = triangles.len() / 2;
-        triangles.select_nth_unstable_by(mid, |a, b| {
-            a.centroid()[axis].total_cmp(&b.centroid()[axis])
-        });
+        let sah_split = if depth < SAH_MAX_DEPTH {
+            sah_split(triangles, c_lo, c_hi)
+        } else {
+            None
+        };
+        let mid = match sah_split {
+            Some(mid) => mid,
+            None => {
+                let axis = (c_hi - c_lo).max_position();
+                let mid = triangles.len() / 2;
+                triangles.select_nth_unstable_by(mid, |a, b| {
+                    a.centroid()[axis].total_cmp(&b.centroid()[axis])
+                });
+                mid
+            }
+        };
         let left = nodes.len();
         nodes[node] = Node {
             lo,
@@ -333,8 +568,14 @@ impl TriangleBvh {
         let empty = nodes[node];
         nodes.extend([empty, empty]);
         let (left_triangles, right_triangles) = triangles.split_at_mut(mid);
-        Self::build(nodes, left, left_triangles, offset);
-        Self::build(nodes, left + 1, right_triangles, offset + mid as u32);
+        Self::build(nodes, left, left_triangles, offset, depth + 1);
+        Self::build(
+            nodes,
+            left + 1,
+            right_triangles,
+            offset + mid as u32,
+            depth + 1,
+        );
     }
 
     /// The nearest `t` in `[0, max_t)` where the ray hits a triangle, if any.
@@ -343,8 +584,9 @@ impl TriangleBvh {
         let root = &self.nodes[0];
         slab_entry(origin, inv_dir, root.lo, root.hi, max_t)?;
         let mut best = None;
-        // Subtrees still to visit. Median splits halve every node, so the depth is at most
-        // log2(triangles) + 1 < 33 for any u32-indexed mesh, and at most that many are pending.
+        // Subtrees still to visit, at most one per level: SAH splits stop at depth
+        // SAH_MAX_DEPTH = 24, then median splits halve every node, so the depth is at most
+        // 24 + log2(triangles) + 1 < 58 for any u32-indexed mesh.
         let mut pending = [0u32; 64];
         let mut top = 0usize;
         let mut node = 0u32;
@@ -480,7 +722,10 @@ mod tests {
                 .objects
                 .iter()
                 .filter_map(|o| {
-                    let t = o.mesh.cast_local_ray(&Ray::new(origin, dir), 10.0, false)?;
+                    let t = o
+                        .trees
+                        .mesh
+                        .cast_local_ray(&Ray::new(origin, dir), 10.0, false)?;
                     Some((o.id, t))
                 })
                 .min_by(|a, b| a.1.total_cmp(&b.1));

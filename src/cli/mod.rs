@@ -3,10 +3,13 @@
 //! - `mesh`: one point cloud to one simplified mesh ([`mesh`]).
 //! - `eval`: mean Hausdorff error of a mesh against ground truth ([`eval`]).
 //! - `sim`: the paper's shapes and noisy samples of them ([`sim`]).
+//! - `run`: the daemon ([`run`]); `subscribe`: a client of it ([`subscribe`]).
 
 mod eval;
 mod mesh;
+mod run;
 mod sim;
+mod subscribe;
 
 use std::path::Path;
 
@@ -21,6 +24,7 @@ use tacmesh::TriMesh;
     version,
     about = "Depth scans to small, accurate, physics-ready meshes",
     long_about = "Depth scans to small, accurate, physics-ready meshes.\n\n\
+        Live: `tacmesh run` serves meshes of a simulated scene; `tacmesh subscribe` watches them.\n\
         Offline: `tacmesh sim sample cube -o cube.ply`, then `tacmesh mesh cube.ply -o mesh.ply`, \
         then `tacmesh eval cube mesh.ply`.\n\
         Logs go to standard error; set RUST_LOG (e.g. RUST_LOG=debug) or pass -v for more."
@@ -35,6 +39,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    Run(run::RunArgs),
+    Subscribe(subscribe::SubscribeArgs),
     Mesh(mesh::MeshArgs),
     Eval(eval::EvalArgs),
     #[command(subcommand)]
@@ -58,6 +64,8 @@ pub fn init_logging(verbose: u8) {
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Subscribe(args) => subscribe::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Sim(cmd) => sim::run(cmd),

@@ -1,1 +1,27 @@
-//! Object identity across frames and per-object incremental fusion (work in progress).
+//! Object identity across frames and per-object incremental fusion, with dirty tracking.
+//!
+//! Each frame the daemon hands in the world points of every segmented object; the map keeps
+//! one track per physical object: its id (from 1, never reused), its fused point moments in its
+//! own frame, its pose and motion, and how much it changed since it was last meshed.
+//!
+//! Entry points:
+//! - [`ObjectMap::integrate`]: one frame's [`FrameClusters`] in, a [`FrameReport`] out
+//!   (created, removed, moved, reset objects).
+//! - [`ObjectMap::take_mesh_jobs`]: the objects that changed enough to re-mesh, as
+//!   [`MeshJob`]s (a grid for `tacmesh_reconstruct::surface::mesh_moment_grid`).
+//! - [`ObjectMap::objects`]: an [`ObjectSummary`] per object.
+//!
+//! Modules, in the order a frame runs through them: [`associate`] (greedy nearest centroids),
+//! [`icp`] (point-to-plane alignment to the fused moments, with [`solve6`]), [`object`]
+//! (pose dead band, fusion), [`change`] (the dirty measure), [`object_map`] (the whole).
+
+pub mod associate;
+pub mod change;
+pub mod config;
+pub mod icp;
+pub mod object;
+pub mod object_map;
+pub mod solve6;
+
+pub use config::{TrackConfig, TrackError};
+pub use object_map::{FrameClusters, FrameReport, MeshJob, ObjectMap, ObjectSummary};

@@ -10,7 +10,10 @@ use std::time::Duration;
 /// [`crate::DepthFrame::capture_time`] and of the wire format's `capture_time_ns`.
 pub fn monotonic_now() -> Duration {
     let t = rustix::time::clock_gettime(rustix::time::ClockId::Monotonic);
-    Duration::new(t.tv_sec.max(0) as u64, t.tv_nsec.clamp(0, 999_999_999) as u32)
+    Duration::new(
+        t.tv_sec.max(0) as u64,
+        t.tv_nsec.clamp(0, 999_999_999) as u32,
+    )
 }
 
 #[cfg(test)]

@@ -1,0 +1,137 @@
+//! The live daemon under its default load: `cargo bench --bench daemon [-- SECONDS [SPEC]]`.
+//!
+//! Starts the real `tacmesh run` (this profile's build) on the default demo scene (640×480 at
+//! 30 fps, paced) for 60 s, subscribes over its socket, and reports: sustained frame rate,
+//! frames dropped, frame-to-publish latency p50/p99, per-stage p50/p99 (from the daemon's last
+//! Stats message), peak RSS (VmHWM from /proc), bytes per second on the socket, and what one
+//! subscriber saw (upserts, removes, data age at arrival). Prints a Markdown table for
+//! BENCHMARKS.md. Not a test: nothing here asserts a time.
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use tacmesh::protocol::{Message, Stats};
+use tacmesh::source::monotonic_now;
+use tacmesh::subscriber::Subscription;
+
+fn main() {
+    let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
+    let seconds: f64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(60.0);
+    let sensor = args.next().unwrap_or_else(|| "sim".into());
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let socket: PathBuf = dir.path().join("bench.sock");
+
+    let mut daemon = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["run", "--sensor", &sensor, "--socket"])
+        .arg(&socket)
+        .args(["--duration-s", &seconds.to_string()])
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("tacmesh runs");
+    let pid = daemon.id();
+
+    let started = Instant::now();
+    while !socket.exists() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "daemon never bound its socket"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut subscription =
+        Subscription::connect(&socket, Some(Duration::from_secs(5))).expect("subscribes");
+
+    // RSS sampler: the daemon's peak resident set, from its own high-water mark.
+    let rss = std::thread::spawn(move || {
+        let mut peak_kib = 0u64;
+        while let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
+            for line in status.lines() {
+                if let Some(v) = line.strip_prefix("VmHWM:") {
+                    let kib: u64 = v.trim().trim_end_matches("kB").trim().parse().unwrap_or(0);
+                    peak_kib = peak_kib.max(kib);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        peak_kib
+    });
+
+    let mut last_stats: Option<(Instant, Stats)> = None;
+    let mut first_stats: Option<(Instant, Stats)> = None;
+    let (mut upserts, mut removes) = (0u64, 0u64);
+    let mut ages_ms: Vec<f64> = Vec::new();
+    loop {
+        match subscription.next_message() {
+            Ok(Message::Upsert(upsert)) => {
+                upserts += 1;
+                let age = monotonic_now()
+                    .as_nanos()
+                    .saturating_sub(upsert.capture_time_ns as u128);
+                ages_ms.push(age as f64 / 1e6);
+            }
+            Ok(Message::Remove { .. }) => removes += 1,
+            Ok(Message::Stats(stats)) => {
+                if first_stats.is_none() {
+                    first_stats = Some((Instant::now(), stats.clone()));
+                }
+                last_stats = Some((Instant::now(), stats));
+            }
+            Ok(Message::Goodbye { .. }) => break,
+            Ok(_) => {}
+            Err(err) => {
+                eprintln!("subscription ended: {err}");
+                break;
+            }
+        }
+    }
+    let status = daemon.wait().expect("daemon exits");
+    let peak_rss_kib = rss.join().unwrap_or(0);
+    let (Some((t0, s0)), Some((t1, s1))) = (first_stats, last_stats) else {
+        panic!("no stats received");
+    };
+    let span_s = (t1 - t0).as_secs_f64().max(1e-9);
+    let fps = (s1.frames_in - s0.frames_in) as f64 / span_s;
+    let processed_fps =
+        ((s1.frames_in - s1.frames_dropped) - (s0.frames_in - s0.frames_dropped)) as f64 / span_s;
+    let bytes_per_s = (s1.bytes_sent - s0.bytes_sent) as f64 / span_s;
+    ages_ms.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        ages_ms
+            .get(((ages_ms.len() as f64 * q).ceil() as usize).saturating_sub(1))
+            .copied()
+            .unwrap_or(0.0)
+    };
+
+    println!("\n## tacmesh run, {sensor}, {seconds:.0} s (exit {status})\n");
+    println!("| measure | value |\n|---|---|");
+    println!("| frames from sensor | {} ({fps:.1} fps) |", s1.frames_in);
+    println!("| frames processed | {:.1} fps |", processed_fps);
+    println!(
+        "| frames dropped | {} ({:.1} %) |",
+        s1.frames_dropped,
+        100.0 * s1.frames_dropped as f64 / s1.frames_in.max(1) as f64
+    );
+    println!(
+        "| frame-to-publish p50 / p99 | {:.1} / {:.1} ms |",
+        s1.frame_to_publish_p50_ms, s1.frame_to_publish_p99_ms
+    );
+    for stage in &s1.stage_latencies {
+        println!(
+            "| stage {} p50 / p99 | {:.1} / {:.1} ms |",
+            stage.stage, stage.p50_ms, stage.p99_ms
+        );
+    }
+    println!("| objects tracked at end | {} |", s1.objects_tracked);
+    println!("| meshing runs | {} |", s1.meshing_runs);
+    println!("| meshes published | {} |", s1.meshes_published);
+    println!("| socket bytes / s (1 subscriber) | {:.0} |", bytes_per_s);
+    println!("| peak RSS | {:.1} MiB |", peak_rss_kib as f64 / 1024.0);
+    println!("| subscriber: upserts / removes | {upserts} / {removes} |");
+    println!(
+        "| subscriber: data age at arrival p50 / p99 | {:.1} / {:.1} ms |",
+        pct(0.5),
+        pct(0.99)
+    );
+}

@@ -1,0 +1,105 @@
+//! Per-stage times of segmentation on one thread, the daemon's budget: `cargo bench -p
+//! tacmesh-segment` (release). Each scene is segmented with the exact per-point defaults
+//! (`SegmentConfig::default()`), the daemon's settings (`SegmentConfig::live()`), and the
+//! daemon's settings with the previous frame's planes as hints; the ratio is against the
+//! defaults in the same process. Median of `RUNS` runs after one warm-up.
+
+#[path = "../tests/util/mod.rs"]
+#[allow(dead_code)] // the benchmark uses the frames, not the IoU helper
+mod util;
+
+use std::path::Path;
+use std::time::Duration;
+
+use glam::Vec3;
+use tacmesh_segment::{segment_timed, SegmentConfig, StageTimes};
+
+const RUNS: usize = 15;
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Median per stage (each stage's own median) over `RUNS` runs, after a warm-up.
+fn time(points: &[Vec3], config: &SegmentConfig, with_hints: bool) -> StageTimes {
+    let (warm, _) = segment_timed(points, config, &[]);
+    let hints = if with_hints { warm.planes } else { Vec::new() };
+    let runs: Vec<StageTimes> = (0..RUNS)
+        .map(|_| segment_timed(points, config, &hints).1)
+        .collect();
+    let median = |stage: fn(&StageTimes) -> Duration| {
+        let mut v: Vec<Duration> = runs.iter().map(stage).collect();
+        v.sort_unstable();
+        v[v.len() / 2]
+    };
+    StageTimes {
+        planes: median(|t| t.planes),
+        classify: median(|t| t.classify),
+        voxels: median(|t| t.voxels),
+        creases: median(|t| t.creases),
+        clusters: median(|t| t.clusters),
+    }
+}
+
+fn report(scene: &str, points: &[Vec3], viewpoint_m: Vec3) {
+    let finite = points.iter().filter(|p| p.is_finite()).count();
+    println!("{scene}: {finite} finite points");
+    println!(
+        "  {:<22} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6}",
+        "config", "planes", "classify", "voxels", "creases", "clusters", "total", "ratio"
+    );
+    let exact = SegmentConfig {
+        viewpoint_m,
+        ..SegmentConfig::default()
+    };
+    let live = SegmentConfig {
+        viewpoint_m,
+        ..SegmentConfig::live()
+    };
+    let mut baseline = None;
+    for (name, config, with_hints) in [
+        ("default", &exact, false),
+        ("live", &live, false),
+        ("live + plane hints", &live, true),
+    ] {
+        let t = time(points, config, with_hints);
+        let total = ms(t.total());
+        let base = *baseline.get_or_insert(total);
+        println!(
+            "  {name:<22} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>6.3}",
+            ms(t.planes),
+            ms(t.classify),
+            ms(t.voxels),
+            ms(t.creases),
+            ms(t.clusters),
+            total,
+            total / base
+        );
+    }
+}
+
+fn main() {
+    // One thread, as in the daemon (the other core renders or reads the camera).
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build();
+    let Ok(pool) = pool else {
+        eprintln!("cannot build a one-thread pool");
+        return;
+    };
+    pool.install(|| {
+        let frame = util::tabletop_frame(7, 0);
+        report(
+            "simulated tabletop 640x480",
+            &frame.points_in_world,
+            frame.sensor_in_world,
+        );
+        for name in ["mosd/osd_test0.pcd", "mosd/osd_test35.pcd"] {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../shared/data/pointclouds")
+                .join(name);
+            match tacmesh_formats::pcd::read_pcd(&path) {
+                Ok(cloud) => report(name, &cloud.points, Vec3::ZERO),
+                Err(err) => println!("{name}: skipped ({err})"),
+            }
+        }
+    });
+}

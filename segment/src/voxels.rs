@@ -1,0 +1,88 @@
+//! Voxel-grid downsampling (PCL's `VoxelGrid` filter; Rusu 2009, §2.3): the points fall into
+//! cubic cells of a given side, and each occupied cell is represented by the centroid of its
+//! points and how many there are. Later stages (creases, clustering) run on the centroids, and
+//! every point takes the label of its cell.
+//!
+//! Cells are keyed in a hash map by their integer coordinates. Points of a depth image arrive
+//! in pixel order, so consecutive points usually share a cell: the last cell is remembered and
+//! the hash lookup skipped for repeats (a speed-up only; any point order gives the same cells).
+
+use glam::{DVec3, Vec3};
+use rustc_hash::FxHashMap;
+
+/// The occupied cells of a set of points.
+pub(crate) struct Cells {
+    /// Centroid of each cell's points, in order of first occurrence.
+    pub(crate) centroids: Vec<Vec3>,
+    /// How many points each cell holds (at least 1).
+    pub(crate) counts: Vec<u32>,
+    /// The cell of each input index, in the order of the input.
+    pub(crate) cell_of: Vec<u32>,
+}
+
+/// Bins `indices` (of finite points) into cells of side `cell_m` (> 0, finite).
+pub(crate) fn voxel_cells(points: &[Vec3], indices: &[u32], cell_m: f32) -> Cells {
+    let inv_cell_m = 1.0 / cell_m;
+    let mut id_of: FxHashMap<[i32; 3], u32> = FxHashMap::default();
+    // Sums relative to each cell's corner, so that far-off clouds keep their precision.
+    let mut sums: Vec<DVec3> = Vec::new();
+    let mut counts: Vec<u32> = Vec::new();
+    let mut corners: Vec<Vec3> = Vec::new();
+    let mut cell_of = Vec::with_capacity(indices.len());
+    let mut last: Option<([i32; 3], u32)> = None;
+    for &i in indices {
+        let p = points[i as usize];
+        let q = (p * inv_cell_m).floor();
+        // Saturating casts: absurdly distant points only share cells.
+        let key = [q.x as i32, q.y as i32, q.z as i32];
+        let id = match last {
+            Some((last_key, id)) if last_key == key => id,
+            _ => {
+                let next = counts.len() as u32;
+                let id = *id_of.entry(key).or_insert(next);
+                if id == next {
+                    sums.push(DVec3::ZERO);
+                    counts.push(0);
+                    corners.push(q * cell_m);
+                }
+                last = Some((key, id));
+                id
+            }
+        };
+        sums[id as usize] += (p - corners[id as usize]).as_dvec3();
+        counts[id as usize] += 1;
+        cell_of.push(id);
+    }
+    let centroids = sums
+        .iter()
+        .zip(&counts)
+        .zip(&corners)
+        .map(|((&sum, &n), &corner)| corner + (sum / n as f64).as_vec3())
+        .collect();
+    Cells {
+        centroids,
+        counts,
+        cell_of,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn voxel_cells_average_the_points_of_each_cell() {
+        let points = [
+            Vec3::new(0.001, 0.001, 0.001),
+            Vec3::new(0.013, 0.001, 0.001),
+            Vec3::new(0.003, 0.003, 0.003),
+            Vec3::NAN, // not listed below
+            Vec3::new(0.017, 0.001, 0.001),
+        ];
+        let cells = voxel_cells(&points, &[0, 1, 2, 4], 0.01);
+        assert_eq!(cells.counts, vec![2, 2]);
+        assert_eq!(cells.cell_of, vec![0, 1, 0, 1]);
+        assert!(cells.centroids[0].distance(Vec3::splat(0.002)) < 1e-6);
+        assert!(cells.centroids[1].distance(Vec3::new(0.015, 0.001, 0.001)) < 1e-6);
+    }
+}

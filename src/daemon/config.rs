@@ -1,0 +1,318 @@
+//! The daemon's configuration: a strict TOML file (unknown keys are errors naming the key and
+//! line), every key optional with the default documented beside it. `tacmesh.example.toml` at
+//! the repository root lists them all.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+
+/// Everything `tacmesh run` can be told. Command-line options override the file.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaemonConfig {
+    pub sensor: SensorSection,
+    pub socket: SocketSection,
+    pub pipeline: PipelineSection,
+    pub track: TrackSection,
+    pub mesh: MeshSection,
+    pub stats: StatsSection,
+}
+
+/// Which depth source to read.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorSection {
+    /// `sim` (the built-in demo scene), `sim:demo`, or `sim:PATH` to a scene TOML file.
+    pub spec: String,
+    /// Override the scene's pacing: `true` renders at the scene's frame rate of wall-clock
+    /// time, `false` as fast as the pipeline takes frames. Default: the scene file's choice.
+    pub paced: Option<bool>,
+}
+
+impl Default for SensorSection {
+    fn default() -> Self {
+        Self {
+            spec: "sim".into(),
+            paced: None,
+        }
+    }
+}
+
+/// The Unix socket meshes are served on.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SocketSection {
+    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-$USER.sock` in the
+    /// temporary directory when there is no runtime directory.
+    pub path: Option<PathBuf>,
+    /// Permission bits of the socket file, as an octal string. Default `"0660"`.
+    pub mode: Option<String>,
+}
+
+/// The per-frame stages.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PipelineSection {
+    /// Frames held between the sensor and the pipeline; when full, the oldest is dropped.
+    /// Default 2: enough to absorb one slow frame, small enough to keep latency low.
+    pub ring_capacity: usize,
+    /// Depths beyond this many metres are invalid. Default 4.0.
+    pub max_range_m: f32,
+    /// Segment every n-th pixel in each direction (1 = every pixel). Points of the skipped
+    /// pixels still join the object of their nearest segmented neighbour and are fused.
+    /// Default 2.
+    pub segment_stride: u32,
+}
+
+impl Default for PipelineSection {
+    fn default() -> Self {
+        Self {
+            ring_capacity: 2,
+            max_range_m: 4.0,
+            segment_stride: 2,
+        }
+    }
+}
+
+/// Object identity and fusion.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackSection {
+    /// Fused voxel edge, metres. Default 0.005.
+    pub voxel_size_m: f32,
+    /// An object unseen for this many seconds is removed. Default 1.0.
+    pub leave_after_s: f32,
+    /// Least time between two meshings of one object, seconds. Default 0.25.
+    pub remesh_interval_s: f32,
+}
+
+impl Default for TrackSection {
+    fn default() -> Self {
+        Self {
+            voxel_size_m: 0.005,
+            leave_after_s: 1.0,
+            remesh_interval_s: 0.25,
+        }
+    }
+}
+
+/// Simplification.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MeshSection {
+    /// The simplifier's stop rule: no marching-cubes vertex ends farther than this many metres
+    /// from the published surface. Default 0.004.
+    pub max_residual_m: f32,
+    /// Fit the simplified vertices to the fused data (restores corners). Default true.
+    pub fit_to_data: bool,
+}
+
+impl Default for MeshSection {
+    fn default() -> Self {
+        Self {
+            max_residual_m: 0.004,
+            fit_to_data: true,
+        }
+    }
+}
+
+/// Counters on the socket and in the log.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StatsSection {
+    /// Seconds between Stats messages to subscribers. Default 1.0.
+    pub publish_interval_s: f32,
+    /// Seconds between counter lines in the log. Default 10.0.
+    pub log_interval_s: f32,
+}
+
+impl Default for StatsSection {
+    fn default() -> Self {
+        Self {
+            publish_interval_s: 1.0,
+            log_interval_s: 10.0,
+        }
+    }
+}
+
+/// A configuration that cannot be used; the daemon stops before it starts anything.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read the config file {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("config file {}: {message}", path.display())]
+    Parse { path: PathBuf, message: String },
+    #[error("config: {key} = {value} is out of range: {expected}")]
+    OutOfRange {
+        key: &'static str,
+        value: String,
+        expected: &'static str,
+    },
+}
+
+impl DaemonConfig {
+    /// Reads and checks a config file.
+    pub fn load(path: &Path) -> Result<DaemonConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and checks config text; `path` names it in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<DaemonConfig, ConfigError> {
+        let config: DaemonConfig = toml::from_str(text).map_err(|err| ConfigError::Parse {
+            path: path.to_owned(),
+            message: describe_toml_error(text, &err),
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks every value's range, so that a bad config fails at start and not mid-run.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        fn positive(key: &'static str, value: f32) -> Result<(), ConfigError> {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(ConfigError::OutOfRange {
+                    key,
+                    value: value.to_string(),
+                    expected: "a finite number above 0",
+                })
+            }
+        }
+        positive("pipeline.max_range_m", self.pipeline.max_range_m)?;
+        positive("track.voxel_size_m", self.track.voxel_size_m)?;
+        positive("track.leave_after_s", self.track.leave_after_s)?;
+        positive("track.remesh_interval_s", self.track.remesh_interval_s)?;
+        positive("mesh.max_residual_m", self.mesh.max_residual_m)?;
+        positive("stats.publish_interval_s", self.stats.publish_interval_s)?;
+        positive("stats.log_interval_s", self.stats.log_interval_s)?;
+        if !(1..=64).contains(&self.pipeline.ring_capacity) {
+            return Err(ConfigError::OutOfRange {
+                key: "pipeline.ring_capacity",
+                value: self.pipeline.ring_capacity.to_string(),
+                expected: "1 to 64 frames",
+            });
+        }
+        if !(1..=16).contains(&self.pipeline.segment_stride) {
+            return Err(ConfigError::OutOfRange {
+                key: "pipeline.segment_stride",
+                value: self.pipeline.segment_stride.to_string(),
+                expected: "1 to 16 pixels",
+            });
+        }
+        self.socket_mode()?;
+        Ok(())
+    }
+
+    /// The socket file mode: `socket.mode` parsed as octal, or 0660.
+    pub fn socket_mode(&self) -> Result<u32, ConfigError> {
+        let Some(text) = &self.socket.mode else {
+            return Ok(tacmesh_publish::DEFAULT_SOCKET_MODE);
+        };
+        let digits = text.trim_start_matches("0o");
+        match u32::from_str_radix(digits, 8) {
+            Ok(mode) if mode <= 0o777 => Ok(mode),
+            _ => Err(ConfigError::OutOfRange {
+                key: "socket.mode",
+                value: format!("{text:?}"),
+                expected: "an octal permission string such as \"0660\"",
+            }),
+        }
+    }
+
+    /// The socket path: `socket.path`, else the default (see [`default_socket_path`]).
+    pub fn socket_path(&self) -> PathBuf {
+        self.socket.path.clone().unwrap_or_else(default_socket_path)
+    }
+
+    pub(crate) fn leave_after(&self) -> Duration {
+        Duration::from_secs_f32(self.track.leave_after_s)
+    }
+
+    pub(crate) fn remesh_interval(&self) -> Duration {
+        Duration::from_secs_f32(self.track.remesh_interval_s)
+    }
+}
+
+/// `$XDG_RUNTIME_DIR/tacmesh.sock` when the runtime directory is set and exists, else
+/// `tacmesh-$USER.sock` in the temporary directory (per user, so two users do not collide).
+pub fn default_socket_path() -> PathBuf {
+    if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR") {
+        let dir = PathBuf::from(dir);
+        if dir.is_dir() {
+            return dir.join("tacmesh.sock");
+        }
+    }
+    let user = std::env::var("USER").unwrap_or_else(|_| "user".into());
+    std::env::temp_dir().join(format!("tacmesh-{user}.sock"))
+}
+
+/// The toml crate's message with the line number it points at, in one line.
+fn describe_toml_error(text: &str, err: &toml::de::Error) -> String {
+    let message = err.message().trim_end().to_owned();
+    match err.span() {
+        Some(span) => {
+            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+            format!("line {line}: {message}")
+        }
+        None => message,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<DaemonConfig, ConfigError> {
+        DaemonConfig::parse(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn an_empty_file_is_the_defaults() {
+        assert_eq!(parse("").unwrap(), DaemonConfig::default());
+    }
+
+    #[test]
+    fn an_unknown_key_is_named_with_its_line() {
+        let err = parse("[track]\nvoxel_size_m = 0.01\nleave_aftr_s = 2\n").unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("leave_aftr_s"), "{text}");
+        assert!(text.contains("line 3"), "{text}");
+        assert!(text.contains("test.toml"), "{text}");
+    }
+
+    #[test]
+    fn out_of_range_values_fail_at_load() {
+        let err = parse("[track]\nvoxel_size_m = -1\n").unwrap_err();
+        assert!(err.to_string().contains("track.voxel_size_m"), "{err}");
+        let err = parse("[socket]\nmode = \"0999\"\n").unwrap_err();
+        assert!(err.to_string().contains("socket.mode"), "{err}");
+        let err = parse("[pipeline]\nring_capacity = 0\n").unwrap_err();
+        assert!(err.to_string().contains("ring_capacity"), "{err}");
+    }
+
+    #[test]
+    fn socket_mode_is_octal() {
+        let config = parse("[socket]\nmode = \"0600\"\n").unwrap();
+        assert_eq!(config.socket_mode().unwrap(), 0o600);
+        assert_eq!(DaemonConfig::default().socket_mode().unwrap(), 0o660);
+    }
+
+    #[test]
+    fn the_example_file_parses_to_the_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tacmesh.example.toml");
+        let config = DaemonConfig::load(&path).unwrap();
+        let mut expected = DaemonConfig::default();
+        expected.socket.path = config.socket.path.clone();
+        expected.socket.mode = Some("0660".into());
+        assert_eq!(config, expected);
+    }
+}

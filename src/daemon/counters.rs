@@ -1,0 +1,213 @@
+//! The daemon's counters and latency windows: written by the pipeline threads, read into the
+//! Stats message and the periodic log line.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::Duration;
+
+use tacmesh_protocol::{StageLatency, Stats};
+use tacmesh_publish::PublisherCounters;
+
+use crate::frame_ring::RingStats;
+use crate::latency::LatencyWindow;
+
+/// The pipeline stages whose latency is reported, in pipeline order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    Deproject,
+    Segment,
+    Integrate,
+    Mesh,
+    Simplify,
+    Publish,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 6] = [
+        Stage::Deproject,
+        Stage::Segment,
+        Stage::Integrate,
+        Stage::Mesh,
+        Stage::Simplify,
+        Stage::Publish,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Deproject => "deproject",
+            Stage::Segment => "segment",
+            Stage::Integrate => "integrate",
+            Stage::Mesh => "mesh",
+            Stage::Simplify => "simplify",
+            Stage::Publish => "publish",
+        }
+    }
+}
+
+/// Samples kept per latency window: a minute and a half of frames at 30 fps.
+const WINDOW: usize = 2048;
+
+struct Windows {
+    stages: Vec<LatencyWindow>,
+    frame_to_publish: LatencyWindow,
+}
+
+/// Counters shared by the daemon's threads. Frame in/dropped counts live in the ring and
+/// subscriber counts in the publisher; [`Counters::stats`] joins them.
+pub struct Counters {
+    pub invalid_pixels: AtomicU64,
+    pub frames_processed: AtomicU64,
+    pub source_errors: AtomicU64,
+    pub malformed_frames: AtomicU64,
+    pub objects_tracked: AtomicU64,
+    pub meshing_runs: AtomicU64,
+    pub meshing_failures: AtomicU64,
+    pub pose_updates: AtomicU64,
+    windows: Mutex<Windows>,
+}
+
+impl Default for Counters {
+    fn default() -> Self {
+        Self {
+            invalid_pixels: AtomicU64::new(0),
+            frames_processed: AtomicU64::new(0),
+            source_errors: AtomicU64::new(0),
+            malformed_frames: AtomicU64::new(0),
+            objects_tracked: AtomicU64::new(0),
+            meshing_runs: AtomicU64::new(0),
+            meshing_failures: AtomicU64::new(0),
+            pose_updates: AtomicU64::new(0),
+            windows: Mutex::new(Windows {
+                stages: Stage::ALL
+                    .iter()
+                    .map(|_| LatencyWindow::new(WINDOW))
+                    .collect(),
+                frame_to_publish: LatencyWindow::new(WINDOW),
+            }),
+        }
+    }
+}
+
+/// One snapshot of everything, for the log line and the Stats message.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CounterSnapshot {
+    pub ring: RingStats,
+    pub publisher: PublisherCounters,
+    pub frames_processed: u64,
+    pub invalid_pixels: u64,
+    pub source_errors: u64,
+    pub malformed_frames: u64,
+    pub objects_tracked: u64,
+    pub meshing_runs: u64,
+    pub meshing_failures: u64,
+    pub pose_updates: u64,
+    /// `(stage name, p50 ms, p99 ms)` in pipeline order.
+    pub stages: Vec<(&'static str, f32, f32)>,
+    pub frame_to_publish_p50_ms: f32,
+    pub frame_to_publish_p99_ms: f32,
+}
+
+impl Counters {
+    pub fn add(counter: &AtomicU64, n: u64) {
+        counter.fetch_add(n, Ordering::Relaxed);
+    }
+
+    pub fn record(&self, stage: Stage, elapsed: Duration) {
+        let index = Stage::ALL.iter().position(|&s| s == stage).unwrap_or(0);
+        crate::lock(&self.windows).stages[index].record_ms(elapsed.as_secs_f32() * 1e3);
+    }
+
+    pub fn record_frame_to_publish(&self, latency: Duration) {
+        crate::lock(&self.windows)
+            .frame_to_publish
+            .record_ms(latency.as_secs_f32() * 1e3);
+    }
+
+    pub fn snapshot(&self, ring: RingStats, publisher: PublisherCounters) -> CounterSnapshot {
+        let load = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        let windows = crate::lock(&self.windows);
+        let stages = Stage::ALL
+            .iter()
+            .zip(&windows.stages)
+            .map(|(stage, window)| {
+                let (p50, p99) = window.p50_p99_ms();
+                (stage.name(), p50, p99)
+            })
+            .collect();
+        let (frame_to_publish_p50_ms, frame_to_publish_p99_ms) =
+            windows.frame_to_publish.p50_p99_ms();
+        CounterSnapshot {
+            ring,
+            publisher,
+            frames_processed: load(&self.frames_processed),
+            invalid_pixels: load(&self.invalid_pixels),
+            source_errors: load(&self.source_errors),
+            malformed_frames: load(&self.malformed_frames),
+            objects_tracked: load(&self.objects_tracked),
+            meshing_runs: load(&self.meshing_runs),
+            meshing_failures: load(&self.meshing_failures),
+            pose_updates: load(&self.pose_updates),
+            stages,
+            frame_to_publish_p50_ms,
+            frame_to_publish_p99_ms,
+        }
+    }
+}
+
+impl CounterSnapshot {
+    /// The wire form of these counters.
+    pub fn to_stats(&self) -> Stats {
+        Stats {
+            frames_in: self.ring.pushed,
+            frames_dropped: self.ring.dropped,
+            invalid_pixels: self.invalid_pixels,
+            objects_tracked: self.objects_tracked,
+            meshing_runs: self.meshing_runs,
+            meshes_published: self.publisher.meshes_published,
+            bytes_sent: self.publisher.bytes_sent,
+            stage_latencies: self
+                .stages
+                .iter()
+                .map(|&(stage, p50_ms, p99_ms)| StageLatency {
+                    stage: stage.into(),
+                    p50_ms,
+                    p99_ms,
+                })
+                .collect(),
+            frame_to_publish_p50_ms: self.frame_to_publish_p50_ms,
+            frame_to_publish_p99_ms: self.frame_to_publish_p99_ms,
+        }
+    }
+
+    /// One log line of the counters.
+    pub fn log_line(&self) -> String {
+        let stages: Vec<String> = self
+            .stages
+            .iter()
+            .map(|(name, p50, p99)| format!("{name} {p50:.1}/{p99:.1}"))
+            .collect();
+        format!(
+            "frames in {} processed {} dropped {}, invalid pixels {}, source errors {}, malformed frames {}, \
+             objects {}, meshing runs {} (failed {}), pose updates {}, meshes published {}, \
+             bytes sent {}, subscribers {} (dropped {}); frame-to-publish p50/p99 {:.1}/{:.1} ms; \
+             stage p50/p99 ms: {}",
+            self.ring.pushed,
+            self.frames_processed,
+            self.ring.dropped,
+            self.invalid_pixels,
+            self.source_errors,
+            self.malformed_frames,
+            self.objects_tracked,
+            self.meshing_runs,
+            self.meshing_failures,
+            self.pose_updates,
+            self.publisher.meshes_published,
+            self.publisher.bytes_sent,
+            self.publisher.clients_connected,
+            self.publisher.clients_dropped,
+            self.frame_to_publish_p50_ms,
+            self.frame_to_publish_p99_ms,
+            stages.join(", ")
+        )
+    }
+}

@@ -1,0 +1,135 @@
+//! The meshing worker: turns an object's fused state into a simplified mesh, off the frame
+//! path, so that a slow meshing run never holds up frames.
+//!
+//! Jobs wait in a map keyed by object: a newer job of an object replaces its waiting one (the
+//! newer state contains the older), so the queue is bounded by the number of objects.
+
+use std::collections::BTreeMap;
+use std::sync::{Condvar, Mutex};
+use std::time::Instant;
+
+use tacmesh_protocol::SimplifyStats;
+use tacmesh_track::MeshJob;
+
+use super::counters::{Counters, Stage};
+use super::Shared;
+use crate::pipeline::mesh_fused_grid;
+
+#[derive(Default)]
+struct Queue {
+    jobs: BTreeMap<u64, MeshJob>,
+    closed: bool,
+}
+
+/// Mesh jobs waiting for the worker, at most one per object.
+#[derive(Default)]
+pub struct MeshQueue {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl MeshQueue {
+    /// Queues a job, replacing a waiting job of the same object.
+    pub fn submit(&self, job: MeshJob) {
+        let mut queue = crate::lock(&self.queue);
+        queue.jobs.insert(job.object_id, job);
+        self.ready.notify_one();
+    }
+
+    /// Drops the waiting job of a removed object.
+    pub fn cancel(&self, object_id: u64) {
+        crate::lock(&self.queue).jobs.remove(&object_id);
+    }
+
+    /// Jobs waiting now.
+    pub fn len(&self) -> usize {
+        crate::lock(&self.queue).jobs.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// No more jobs: the worker finishes the one in hand and stops; waiting jobs are dropped.
+    pub fn close(&self) {
+        crate::lock(&self.queue).closed = true;
+        self.ready.notify_all();
+    }
+
+    /// The oldest-queued object's job (lowest id first among those waiting), or `None` once
+    /// closed.
+    fn take(&self) -> Option<MeshJob> {
+        let mut queue = crate::lock(&self.queue);
+        loop {
+            if queue.closed {
+                return None;
+            }
+            if let Some((_, job)) = queue.jobs.pop_first() {
+                return Some(job);
+            }
+            queue = self
+                .ready
+                .wait(queue)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+    }
+}
+
+/// The worker loop: runs until the queue is closed.
+pub fn run_mesher(shared: &Shared) {
+    while let Some(job) = shared.mesh_queue.take() {
+        mesh_one(shared, job);
+    }
+}
+
+fn mesh_one(shared: &Shared, job: MeshJob) {
+    let counters = &shared.counters;
+    let started = Instant::now();
+    let result = mesh_fused_grid(
+        &job.grid,
+        Some(job.viewpoint_in_object),
+        shared.config.mesh.max_residual_m,
+        shared.config.mesh.fit_to_data,
+    );
+    Counters::add(&counters.meshing_runs, 1);
+    let (mesh, report) = match result {
+        Ok(done) => done,
+        Err(err) => {
+            // Too little data yet is normal for a new object; anything else is worth a look.
+            Counters::add(&counters.meshing_failures, 1);
+            tracing::debug!("object {}: not meshed yet: {err}", job.object_id);
+            return;
+        }
+    };
+    let mesh_ms =
+        report.normals_ms + report.orient_ms + report.distance_ms + report.marching_cubes_ms;
+    counters.record(
+        Stage::Mesh,
+        std::time::Duration::from_secs_f64(mesh_ms / 1e3),
+    );
+    counters.record(
+        Stage::Simplify,
+        std::time::Duration::from_secs_f64((report.simplify_ms + report.fit_ms) / 1e3),
+    );
+    tracing::debug!(
+        "object {}: meshed {} points into {} faces (from {}) in {:.1} ms",
+        job.object_id,
+        report.points,
+        report.faces,
+        report.recon_faces,
+        started.elapsed().as_secs_f64() * 1e3
+    );
+    let stats = SimplifyStats {
+        faces_in: report.recon_faces.min(u32::MAX as usize) as u32,
+        faces_out: report.faces.min(u32::MAX as usize) as u32,
+        max_residual_m: report.max_residual.max(0.0),
+    };
+    crate::lock(&shared.board).new_mesh(
+        job.object_id,
+        mesh,
+        stats,
+        job.newest_capture,
+        &shared.publisher,
+        counters,
+    );
+}

@@ -1,0 +1,283 @@
+//! `tacmesh run`: the daemon. A source thread reads the sensor into a drop-oldest ring; the
+//! perception thread segments, tracks and fuses each frame; the mesher thread re-meshes dirty
+//! objects; the publisher serves subscribers. The calling thread sends stats and waits for
+//! the stop signal.
+//!
+//! ```text
+//! source ─► FrameRing ─► perception (deproject, segment, track + fuse) ─► MeshQueue ─► mesher
+//!                                     │ planes, moves, removals              │ new meshes
+//!                                     └──────────────► Board ◄───────────────┘
+//!                                                       │ versions
+//!                                                       ▼
+//!                                                   Publisher ─► subscribers
+//! ```
+//!
+//! Entry points: [`Daemon::start`], [`Daemon::run_until_stopped`], [`StopSignal`].
+
+mod board;
+pub mod config;
+mod counters;
+mod mesher;
+mod perception;
+pub mod planes;
+pub mod sensor;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use tacmesh_publish::{PublishError, Publisher, PublisherConfig};
+use tacmesh_source::{DepthSource, SourceError};
+
+pub use config::{default_socket_path, ConfigError, DaemonConfig};
+pub use counters::CounterSnapshot;
+pub use sensor::{SensorError, SensorSpec};
+
+use crate::frame_ring::FrameRing;
+use board::Board;
+use counters::Counters;
+use mesher::MeshQueue;
+use perception::Perception;
+
+/// Why the daemon could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Sensor(#[from] SensorError),
+    #[error(transparent)]
+    Publish(#[from] PublishError),
+    #[error("config [track]: {0}")]
+    Track(#[from] tacmesh_track::TrackError),
+    #[error("cannot start the {name} thread: {source}")]
+    Spawn {
+        name: &'static str,
+        source: std::io::Error,
+    },
+}
+
+/// A stop request that any thread (or a signal handler) can raise and the daemon waits on.
+#[derive(Debug, Clone, Default)]
+pub struct StopSignal {
+    inner: Arc<(Mutex<bool>, Condvar)>,
+}
+
+impl StopSignal {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn request(&self) {
+        let (flag, changed) = &*self.inner;
+        *crate::lock(flag) = true;
+        changed.notify_all();
+    }
+
+    pub fn is_requested(&self) -> bool {
+        *crate::lock(&self.inner.0)
+    }
+
+    /// Waits up to `timeout`; true when a stop was requested.
+    pub fn wait_timeout(&self, timeout: Duration) -> bool {
+        let (flag, changed) = &*self.inner;
+        let deadline = Instant::now() + timeout;
+        let mut requested = crate::lock(flag);
+        while !*requested {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            requested = changed
+                .wait_timeout(requested, left)
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .0;
+        }
+        *requested
+    }
+}
+
+/// What the daemon's threads share.
+pub(crate) struct Shared {
+    config: DaemonConfig,
+    ring: FrameRing<tacmesh_source::Observation>,
+    counters: Counters,
+    board: Mutex<Board>,
+    mesh_queue: MeshQueue,
+    publisher: Publisher,
+    source_stop: AtomicBool,
+}
+
+/// A running daemon.
+pub struct Daemon {
+    shared: Arc<Shared>,
+    source: Option<JoinHandle<()>>,
+    perception: Option<JoinHandle<()>>,
+    mesher: Option<JoinHandle<()>>,
+    started: Instant,
+}
+
+impl Daemon {
+    /// Opens the sensor, binds the socket and starts the threads. Fails before starting
+    /// anything on a bad config, a sensor that cannot be opened or a socket that cannot be
+    /// claimed.
+    pub fn start(config: DaemonConfig) -> Result<Daemon, DaemonError> {
+        config.validate()?;
+        let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))?;
+        let spec = SensorSpec::parse(&config.sensor.spec)?;
+        let source = spec.open(config.sensor.paced)?;
+        let mut publisher_config = PublisherConfig::new(config.socket_path());
+        publisher_config.mode = config.socket_mode()?;
+        let publisher = Publisher::bind(publisher_config)?;
+        tracing::info!(
+            "reading {} ; subscribe with: tacmesh subscribe --socket {}",
+            source.name(),
+            publisher.socket_path().display()
+        );
+        let shared = Arc::new(Shared {
+            ring: FrameRing::new(config.pipeline.ring_capacity),
+            config,
+            counters: Counters::default(),
+            board: Mutex::new(Board::default()),
+            mesh_queue: MeshQueue::default(),
+            publisher,
+            source_stop: AtomicBool::new(false),
+        });
+        let mut daemon = Daemon {
+            shared: Arc::clone(&shared),
+            source: None,
+            perception: None,
+            mesher: None,
+            started: Instant::now(),
+        };
+        let spawn = |name: &'static str, body: Box<dyn FnOnce() + Send>| {
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(body)
+                .map_err(|source| DaemonError::Spawn { name, source })
+        };
+        let s = Arc::clone(&shared);
+        daemon.mesher = Some(spawn("mesher", Box::new(move || mesher::run_mesher(&s)))?);
+        let s = Arc::clone(&shared);
+        daemon.perception = Some(spawn(
+            "perception",
+            Box::new(move || Perception::new(objects).run(&s)),
+        )?);
+        let s = Arc::clone(&shared);
+        daemon.source = Some(spawn("source", Box::new(move || read_source(&s, source)))?);
+        Ok(daemon)
+    }
+
+    /// The socket the daemon serves.
+    pub fn socket_path(&self) -> &std::path::Path {
+        self.shared.publisher.socket_path()
+    }
+
+    /// The counters now.
+    pub fn counters(&self) -> CounterSnapshot {
+        self.shared
+            .counters
+            .snapshot(self.shared.ring.stats(), self.shared.publisher.counters())
+    }
+
+    /// Sends stats and logs counters periodically until `stop` is requested, then shuts down.
+    pub fn run_until_stopped(self, stop: &StopSignal) -> CounterSnapshot {
+        let stats_every = Duration::from_secs_f32(self.shared.config.stats.publish_interval_s);
+        let log_every = Duration::from_secs_f32(self.shared.config.stats.log_interval_s);
+        let mut next_log = Instant::now() + log_every;
+        while !stop.wait_timeout(stats_every) {
+            let snapshot = self.counters();
+            if let Err(err) = self.shared.publisher.stats(snapshot.to_stats()) {
+                tracing::warn!("stats not sent: {err}");
+            }
+            if Instant::now() >= next_log {
+                tracing::info!("{}", snapshot.log_line());
+                next_log += log_every;
+            }
+            if self.source.as_ref().is_some_and(|s| s.is_finished())
+                && self.shared.ring.stats().queued == 0
+                && self.shared.mesh_queue.is_empty()
+            {
+                tracing::info!("the sensor has no more frames; stopping");
+                break;
+            }
+        }
+        self.shutdown()
+    }
+
+    /// Stops the source, finishes the frame and the mesh in flight, says goodbye to
+    /// subscribers and removes the socket.
+    pub fn shutdown(mut self) -> CounterSnapshot {
+        let begun = Instant::now();
+        tracing::info!("stopping");
+        self.shared.source_stop.store(true, Ordering::Relaxed);
+        self.shared.ring.close();
+        if let Some(perception) = self.perception.take() {
+            join(perception, "perception");
+        }
+        self.shared.mesh_queue.close();
+        if let Some(mesher) = self.mesher.take() {
+            join(mesher, "mesher");
+        }
+        // A source blocked in a device read may not return soon; it holds only its own
+        // handle and a reference to the shared state, so it is left to end with the process.
+        if let Some(source) = self.source.take() {
+            let deadline = Instant::now() + Duration::from_millis(500);
+            while !source.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            if source.is_finished() {
+                join(source, "source");
+            } else {
+                tracing::warn!("the sensor did not stop within 0.5 s; leaving it behind");
+            }
+        }
+        let snapshot = self.counters();
+        tracing::info!("{}", snapshot.log_line());
+        // The publisher lives in the shared state; a left-behind source thread may still hold
+        // a reference, so shut the publisher down through the shared reference.
+        self.shared.publisher.shutdown("tacmesh is stopping");
+        tracing::info!(
+            "stopped in {:.0} ms after running {:.1} s",
+            begun.elapsed().as_secs_f64() * 1e3,
+            self.started.elapsed().as_secs_f64()
+        );
+        snapshot
+    }
+}
+
+fn join(handle: JoinHandle<()>, name: &str) {
+    if handle.join().is_err() {
+        tracing::error!("the {name} thread panicked");
+    }
+}
+
+/// The source thread: reads observations into the ring until stopped. Errors are counted and
+/// logged once per burst; the source is retried with backoff; a source at its end stops.
+fn read_source(shared: &Shared, mut source: Box<dyn DepthSource>) {
+    let mut backoff = Duration::from_millis(100);
+    let mut in_burst = false;
+    while !shared.source_stop.load(Ordering::Relaxed) {
+        match source.next_observation() {
+            Ok(observation) => {
+                in_burst = false;
+                backoff = Duration::from_millis(100);
+                shared.ring.push(observation);
+            }
+            Err(SourceError::EndOfStream { device }) => {
+                tracing::info!("{device} has no more frames");
+                break;
+            }
+            Err(err) => {
+                Counters::add(&shared.counters.source_errors, 1);
+                if !in_burst {
+                    tracing::warn!("{}: {err}; retrying (logged once per burst)", source.name());
+                }
+                in_burst = true;
+                std::thread::sleep(backoff);
+                backoff = (backoff * 2).min(Duration::from_secs(2));
+            }
+        }
+    }
+}

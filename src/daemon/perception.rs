@@ -1,0 +1,238 @@
+//! The per-frame path: deproject, segment, track and fuse, then hand dirty objects to the
+//! mesher. Runs on one thread, which owns the tracker and the plane tracker.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use tacmesh_segment::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
+use tacmesh_source::{DepthFrame, Observation};
+use tacmesh_track::{FrameClusters, ObjectMap, TrackConfig};
+
+use super::config::DaemonConfig;
+
+use super::counters::{Counters, Stage};
+use super::planes::PlaneTracker;
+use super::Shared;
+use crate::frame_ring::Pop;
+
+/// The tracker's settings from the daemon's config.
+pub fn track_config(config: &DaemonConfig) -> TrackConfig {
+    TrackConfig {
+        voxel_size_m: config.track.voxel_size_m,
+        leave_after: config.leave_after(),
+        remesh_interval: config.remesh_interval(),
+        ..TrackConfig::default()
+    }
+}
+
+/// A full-resolution point joins the object of its strided neighbour only within this
+/// distance, so pixels across a depth edge do not.
+const LABEL_SPREAD_M: f32 = 0.02;
+
+/// The state the per-frame path keeps between frames.
+pub struct Perception {
+    objects: ObjectMap,
+    planes: PlaneTracker,
+    segment: SegmentConfig,
+    /// Last frame's support planes: segmentation refines them instead of searching anew.
+    plane_hints: Vec<SupportPlane>,
+    malformed_logged: bool,
+}
+
+impl Perception {
+    /// The object map is built by the caller, so that a bad track config fails at start.
+    pub fn new(objects: ObjectMap) -> Self {
+        Self {
+            objects,
+            planes: PlaneTracker::new(),
+            segment: SegmentConfig::live(),
+            plane_hints: Vec::new(),
+            malformed_logged: false,
+        }
+    }
+
+    /// Takes frames from the ring until it is closed and drained.
+    pub fn run(mut self, shared: &Shared) {
+        loop {
+            match shared.ring.pop_timeout(Duration::from_millis(200)) {
+                Pop::Item(observation) => self.process(shared, observation),
+                Pop::TimedOut => {}
+                Pop::Closed => break,
+            }
+        }
+    }
+
+    fn process(&mut self, shared: &Shared, observation: Observation) {
+        let counters = &shared.counters;
+        let started = Instant::now();
+        let (points, organised, capture_time, viewpoint) = match observation {
+            Observation::Depth(frame) => {
+                if !frame.is_consistent() {
+                    self.malformed(shared, &frame);
+                    return;
+                }
+                self.malformed_logged = false;
+                let deprojection = frame.deproject_organised(shared.config.pipeline.max_range_m);
+                Counters::add(&counters.invalid_pixels, deprojection.invalid_pixels as u64);
+                (
+                    deprojection.points_in_world,
+                    Some((frame.intrinsics.width, frame.intrinsics.height)),
+                    frame.capture_time,
+                    Vec3::from(frame.world_from_sensor.translation),
+                )
+            }
+            Observation::Cloud {
+                cloud,
+                world_from_sensor,
+                capture_time,
+            } => {
+                let points = cloud
+                    .points
+                    .iter()
+                    .map(|&p| world_from_sensor.transform_point3(p))
+                    .collect();
+                (
+                    points,
+                    None,
+                    capture_time,
+                    Vec3::from(world_from_sensor.translation),
+                )
+            }
+        };
+        counters.record(Stage::Deproject, started.elapsed());
+
+        let started = Instant::now();
+        let config = SegmentConfig {
+            viewpoint_m: viewpoint,
+            ..self.segment.clone()
+        };
+        let stride = shared.config.pipeline.segment_stride.max(1);
+        let clusters = match organised {
+            Some((width, height)) if stride > 1 => {
+                strided_clusters(&points, width, height, stride, &config, &self.plane_hints)
+            }
+            _ => {
+                let segmentation = segment_with_hints(&points, &config, &self.plane_hints);
+                let clusters = segmentation
+                    .objects
+                    .iter()
+                    .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
+                    .collect();
+                (segmentation, clusters)
+            }
+        };
+        let (segmentation, clusters) = clusters;
+        counters.record(Stage::Segment, started.elapsed());
+
+        let plane_update = self.planes.update(&segmentation.planes);
+        self.plane_hints = segmentation.planes;
+
+        let started = Instant::now();
+        let report = self.objects.integrate(&FrameClusters {
+            capture_time,
+            viewpoint_m: viewpoint,
+            clusters,
+        });
+        counters.record(Stage::Integrate, started.elapsed());
+        Counters::add(&counters.frames_processed, 1);
+
+        {
+            let mut board = crate::lock(&shared.board);
+            for (id, mesh) in plane_update.upserts {
+                board.create(id, glam::Affine3A::IDENTITY);
+                let faces = mesh.triangles.len() as u32;
+                let stats = tacmesh_protocol::SimplifyStats {
+                    faces_in: faces,
+                    faces_out: faces,
+                    max_residual_m: 0.0,
+                };
+                board.new_mesh(id, mesh, stats, capture_time, &shared.publisher, counters);
+            }
+            for id in plane_update.removed {
+                board.remove(id, &shared.publisher);
+            }
+            for &id in &report.created {
+                if let Some(object) = self.objects.objects().find(|o| o.id == id) {
+                    board.create(id, object.world_from_object);
+                }
+            }
+            for &id in &report.removed {
+                shared.mesh_queue.cancel(id);
+                board.remove(id, &shared.publisher);
+            }
+            for &(id, pose) in &report.moved {
+                board.move_to(id, pose, capture_time, &shared.publisher, counters);
+            }
+            counters.objects_tracked.store(
+                self.objects.len() as u64,
+                std::sync::atomic::Ordering::Relaxed,
+            );
+        }
+        for job in self.objects.take_mesh_jobs(capture_time) {
+            shared.mesh_queue.submit(job);
+        }
+    }
+
+    fn malformed(&mut self, shared: &Shared, frame: &DepthFrame) {
+        Counters::add(&shared.counters.malformed_frames, 1);
+        // Once per burst: a source that sends bad frames sends many.
+        if !self.malformed_logged {
+            tracing::warn!(
+                "dropping a malformed frame: {}×{} intrinsics but {} depth values (logged once \
+                 per burst; see the malformed-frame counter)",
+                frame.intrinsics.width,
+                frame.intrinsics.height,
+                frame.depth_m.len()
+            );
+        }
+        self.malformed_logged = true;
+    }
+}
+
+/// Segments every `stride`-th pixel of an organised cloud, then gives each remaining
+/// point the object of its strided neighbour (the top-left pixel of its stride × stride
+/// block) when the two are within [`LABEL_SPREAD_M`] and the point is not on a support plane.
+fn strided_clusters(
+    points: &[Vec3],
+    width: u32,
+    height: u32,
+    stride: u32,
+    config: &SegmentConfig,
+    hints: &[SupportPlane],
+) -> (Segmentation, Vec<Vec<Vec3>>) {
+    let (width, height, stride) = (width as usize, height as usize, stride as usize);
+    let sub_width = width.div_ceil(stride);
+    let sub: Vec<Vec3> = (0..height)
+        .step_by(stride)
+        .flat_map(|v| {
+            (0..width)
+                .step_by(stride)
+                .map(move |u| points[v * width + u])
+        })
+        .collect();
+    let segmentation = segment_with_hints(&sub, config, hints);
+    let plane_band_m = config.plane_distance_m + config.plane_margin_m;
+    let mut clusters = vec![Vec::new(); segmentation.objects.len()];
+    for v in 0..height {
+        for u in 0..width {
+            let p = points[v * width + u];
+            if !p.is_finite() {
+                continue;
+            }
+            let j = (v / stride) * sub_width + u / stride;
+            let label = segmentation.labels[j] as usize;
+            if label == 0 || p.distance(sub[j]) > LABEL_SPREAD_M {
+                continue;
+            }
+            if segmentation
+                .planes
+                .iter()
+                .any(|plane| plane.signed_distance_m(p) <= plane_band_m)
+            {
+                continue;
+            }
+            clusters[label - 1].push(p);
+        }
+    }
+    (segmentation, clusters)
+}

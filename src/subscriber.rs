@@ -1,0 +1,110 @@
+//! A blocking client of the daemon's socket: connects, checks the Hello, then yields messages.
+//! `tacmesh subscribe` and the integration tests use it; any other client follows
+//! `docs/protocol.md`.
+
+use std::io::Read;
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use tacmesh_protocol::{check_hello, encode, FrameDecoder, Message, Sender, WireError};
+
+/// Why a subscription failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SubscribeError {
+    #[error(
+        "cannot connect to {}: {source}; is `tacmesh run` running with this --socket?",
+        path.display()
+    )]
+    Connect {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("reading from {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("the daemon on {} sent something unreadable: {source}", path.display())]
+    Wire { path: PathBuf, source: WireError },
+    #[error("the daemon on {} closed the connection", path.display())]
+    Closed { path: PathBuf },
+}
+
+/// One connection to the daemon.
+pub struct Subscription {
+    stream: UnixStream,
+    path: PathBuf,
+    decoder: FrameDecoder,
+    buffer: Vec<u8>,
+    /// The Hello's server name.
+    pub server: String,
+}
+
+impl Subscription {
+    /// Connects, sends Subscribe and reads the Hello (refusing another protocol version).
+    /// `read_timeout` bounds each wait for data (`None`: wait for ever).
+    pub fn connect(path: &Path, read_timeout: Option<Duration>) -> Result<Self, SubscribeError> {
+        let connect_err = |source| SubscribeError::Connect {
+            path: path.to_owned(),
+            source,
+        };
+        let mut stream = UnixStream::connect(path).map_err(connect_err)?;
+        stream.set_read_timeout(read_timeout).map_err(connect_err)?;
+        let mut hello = Vec::new();
+        // Subscribe is empty and always encodes.
+        if encode(&Message::Subscribe, &mut hello).is_ok() {
+            std::io::Write::write_all(&mut stream, &hello).map_err(connect_err)?;
+        }
+        let mut subscription = Subscription {
+            stream,
+            path: path.to_owned(),
+            decoder: FrameDecoder::new(Sender::Server),
+            buffer: vec![0; 64 * 1024],
+            server: String::new(),
+        };
+        let first = subscription.next_message()?;
+        check_hello(&first).map_err(|source| SubscribeError::Wire {
+            path: path.to_owned(),
+            source,
+        })?;
+        if let Message::Hello { server, .. } = first {
+            subscription.server = server;
+        }
+        Ok(subscription)
+    }
+
+    /// The next message; blocks (up to the read timeout).
+    pub fn next_message(&mut self) -> Result<Message, SubscribeError> {
+        loop {
+            match self.decoder.next_message() {
+                Ok(Some(message)) => return Ok(message),
+                Ok(None) => {}
+                Err(source) => {
+                    return Err(SubscribeError::Wire {
+                        path: self.path.clone(),
+                        source,
+                    })
+                }
+            }
+            let n = self
+                .stream
+                .read(&mut self.buffer)
+                .map_err(|source| SubscribeError::Read {
+                    path: self.path.clone(),
+                    source,
+                })?;
+            if n == 0 {
+                return Err(SubscribeError::Closed {
+                    path: self.path.clone(),
+                });
+            }
+            self.decoder.push(&self.buffer[..n]);
+        }
+    }
+
+    /// The underlying socket (tests use it to stall or misbehave on purpose).
+    pub fn stream(&self) -> &UnixStream {
+        &self.stream
+    }
+}

@@ -1,0 +1,195 @@
+//! Tracker settings, with units in the names and the defaults the daemon uses.
+
+use std::time::Duration;
+
+/// Why a [`TrackConfig`] was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrackError {
+    #[error("track setting `{name}` = {value} must be a positive finite number ({hint})")]
+    NotPositive {
+        name: &'static str,
+        value: f64,
+        hint: &'static str,
+    },
+    #[error(
+        "track setting `occupied_cell_points` ({occupied}) must be at least 1 and below \
+         `saturated_cell_points` ({saturated})"
+    )]
+    CellCounts { occupied: u32, saturated: u32 },
+    #[error("track setting `{name}` = {value} is a fraction and must be within [0, 1]")]
+    Fraction { name: &'static str, value: f32 },
+}
+
+/// How objects are told apart, fused, aligned and offered for meshing.
+///
+/// Lengths in metres, angles in radians, times on the capture clock (the sensor's timestamps,
+/// never the wall clock, so replayed and simulated streams behave like live ones).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackConfig {
+    /// Voxel edge of each object's fused moment grid, metres. Default 0.005.
+    pub voxel_size_m: f32,
+    /// Largest distance between a cluster's centroid and a track's predicted centroid that
+    /// still associates them, metres. Default 0.08.
+    pub match_distance_m: f32,
+    /// A track not seen for this long (capture time) is removed. Default 1 s.
+    pub leave_after: Duration,
+    /// Frames an object must be seen in before it is offered for meshing. Default 3.
+    pub confirm_frames: u32,
+    /// Least time between two meshing runs of one object (capture time). Default 0.25 s.
+    pub remesh_interval: Duration,
+    /// Fraction of an object's voxels, weighed by their point counts capped at
+    /// `saturated_cell_points`, that must have changed enough (see `occupied_cell_points`)
+    /// since its last meshing to mesh it again. Default 0.03.
+    pub remesh_min_change: f32,
+    /// Clusters with fewer finite points than this are ignored (no track, no fusion).
+    /// Default 20.
+    pub min_cluster_points: usize,
+    /// Points a voxel needs to count as part of the surface for change tracking: a voxel that
+    /// reaches it has changed. Default 4.
+    pub occupied_cell_points: u32,
+    /// Points beyond which more points in a voxel no longer change its plane enough to matter:
+    /// below it a voxel whose count doubled since the last meshing has changed, at it the voxel
+    /// is settled. Default 64.
+    pub saturated_cell_points: u32,
+    /// Translation of the object's origin below which an aligned pose is taken as noise and
+    /// the published pose is kept, metres. Default 0.0025 (half a voxel).
+    pub move_threshold_m: f32,
+    /// Rotation below which an aligned pose is taken as noise, radians. Default 1°.
+    pub move_threshold_rad: f32,
+    /// Alignment: the coarse level's voxel is this many fused voxels wide (capture range about
+    /// one coarse voxel). Default 4.
+    pub icp_coarse_factor: i32,
+    /// Alignment uses at most this many of a cluster's points (an even stride through them);
+    /// fusion uses them all. Default 1000: sub-millimetre alignment needs no more, and
+    /// alignment is most of the cost of a frame.
+    pub icp_max_points: usize,
+    /// Alignment iterations on the coarse level, then on the fine level. Defaults 4 and 6.
+    pub icp_coarse_iterations: u32,
+    pub icp_fine_iterations: u32,
+    /// Correspondences farther than this many voxels (of the level being aligned) from their
+    /// plane are rejected as outliers. Default 3.
+    pub icp_reject_voxels: f32,
+    /// Alignment fails (and the object's fused state is reset to the new cluster) when the RMS
+    /// point-to-plane residual of the inliers exceeds this, metres. Default 0.01.
+    pub icp_max_rms_m: f32,
+    /// Alignment fails when fewer than this fraction of the cluster's points (or fewer than
+    /// `icp_min_inliers`) find a plane within the rejection distance. Defaults 0.5 and 30.
+    pub icp_min_inlier_fraction: f32,
+    pub icp_min_inliers: usize,
+    /// Weight of the prior that keeps unobservable motion (a sphere spinning about its centre,
+    /// a plane sliding along itself) at the predicted pose, per point, relative to one point's
+    /// squared residual. Default 1e-3.
+    pub icp_prior_weight: f32,
+    /// Motion directions whose curvature (in the alignment's normal equations, rotations
+    /// scaled to displacements) is below this fraction of the best-constrained direction's are
+    /// unobservable and kept at the prediction. Default 0.05 (a partial sphere's spin scores
+    /// about 0.02, a cube's worst-seen face about 0.1).
+    pub icp_degenerate_ratio: f32,
+}
+
+impl Default for TrackConfig {
+    fn default() -> Self {
+        Self {
+            voxel_size_m: 0.005,
+            match_distance_m: 0.08,
+            leave_after: Duration::from_secs(1),
+            confirm_frames: 3,
+            remesh_interval: Duration::from_millis(250),
+            remesh_min_change: 0.03,
+            min_cluster_points: 20,
+            occupied_cell_points: 4,
+            saturated_cell_points: 64,
+            move_threshold_m: 0.0025,
+            move_threshold_rad: 1f32.to_radians(),
+            icp_coarse_factor: 4,
+            icp_max_points: 1000,
+            icp_coarse_iterations: 4,
+            icp_fine_iterations: 6,
+            icp_reject_voxels: 3.0,
+            icp_max_rms_m: 0.01,
+            icp_min_inlier_fraction: 0.5,
+            icp_min_inliers: 30,
+            icp_prior_weight: 1e-3,
+            icp_degenerate_ratio: 0.02,
+        }
+    }
+}
+
+impl TrackConfig {
+    /// Checks every setting; the tracker refuses a config that fails.
+    pub fn validate(&self) -> Result<(), TrackError> {
+        let positive = [
+            (
+                "voxel_size_m",
+                self.voxel_size_m,
+                "a few millimetres for tabletop objects",
+            ),
+            (
+                "match_distance_m",
+                self.match_distance_m,
+                "about how far an object moves between frames, plus margin",
+            ),
+            (
+                "move_threshold_m",
+                self.move_threshold_m,
+                "about half a voxel",
+            ),
+            ("move_threshold_rad", self.move_threshold_rad, "about 1°"),
+            (
+                "icp_reject_voxels",
+                self.icp_reject_voxels,
+                "about 3 voxels",
+            ),
+            (
+                "icp_max_rms_m",
+                self.icp_max_rms_m,
+                "about twice the sensor noise",
+            ),
+            (
+                "icp_prior_weight",
+                self.icp_prior_weight,
+                "small, such as 1e-3",
+            ),
+        ];
+        for (name, value, hint) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(TrackError::NotPositive {
+                    name,
+                    value: f64::from(value),
+                    hint,
+                });
+            }
+        }
+        if self.icp_max_points < self.icp_min_inliers.max(6) {
+            return Err(TrackError::NotPositive {
+                name: "icp_max_points",
+                value: self.icp_max_points as f64,
+                hint: "at least `icp_min_inliers`; about 1000",
+            });
+        }
+        if self.icp_coarse_factor < 1 {
+            return Err(TrackError::NotPositive {
+                name: "icp_coarse_factor",
+                value: f64::from(self.icp_coarse_factor),
+                hint: "an integer such as 4",
+            });
+        }
+        if self.occupied_cell_points == 0 || self.occupied_cell_points >= self.saturated_cell_points
+        {
+            return Err(TrackError::CellCounts {
+                occupied: self.occupied_cell_points,
+                saturated: self.saturated_cell_points,
+            });
+        }
+        for (name, value) in [
+            ("remesh_min_change", self.remesh_min_change),
+            ("icp_degenerate_ratio", self.icp_degenerate_ratio),
+            ("icp_min_inlier_fraction", self.icp_min_inlier_fraction),
+        ] {
+            if !(0.0..=1.0).contains(&value) {
+                return Err(TrackError::Fraction { name, value });
+            }
+        }
+        Ok(())
+    }
+}

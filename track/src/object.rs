@@ -1,0 +1,336 @@
+//! One tracked object: its fused moments in its own frame, its pose and motion, and what
+//! changed since it was last meshed.
+//!
+//! Why point moments rather than a TSDF: moments are additive, so fusing a frame is one
+//! addition per point (cost follows the cluster, never the history) and the state is one fixed
+//! record per voxel (memory follows the surface area); a plane fitted to summed moments is the
+//! exact least-squares plane of every point ever seen there, at any neighbourhood size, with no
+//! truncation band or weighting ramp to choose; and it is what the offline pipeline
+//! (`tacmesh_reconstruct::surface::mesh_moment_grid`) already meshes, so a live object and a
+//! file give the same surface. A TSDF would need rays from the sensor per point, a band and a
+//! weight cap, and would smear sub-voxel planes.
+//!
+//! Pose: each frame the cluster is aligned to the fused model (see `icp`), starting from the
+//! last pose moved on by a constant body-frame velocity. `world_from_object` changes only when
+//! the aligned pose differs from it by more than the move thresholds (a dead band), so a
+//! static object seen from a static camera keeps its pose exactly and noise never accumulates;
+//! slow motion adds up against the kept pose until it crosses a threshold. Points are always
+//! fused with the published pose; below the thresholds that smears the model by less than half
+//! a voxel. The object frame starts axis-aligned with its origin at the first cluster's
+//! centroid, which keeps the alignment well conditioned.
+//!
+//! Failure: if the cluster cannot be aligned (too few points near the fused surface, or too
+//! large a residual), the fused state restarts from the cluster, keeping the id.
+
+use std::time::Duration;
+
+use glam::{Affine3A, Quat, Vec3};
+use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tracing::debug;
+
+use crate::change::ChangeTracker;
+use crate::config::TrackConfig;
+use crate::icp::{align_to_grids, CentroidAnchor, IcpFailure, IcpLevel, IcpScratch, IcpSettings};
+
+/// Fraction of a cluster's points that must find the fused surface for a fine-only alignment
+/// to stand.
+const FAMILIAR_FRACTION: f32 = 0.8;
+
+/// Weight of the newest cluster in the smoothed centroid: about ten frames' memory, which
+/// averages out the centroid's jitter from frame to frame (a random sample of the visible
+/// surface) while still following a visible part that changes as the object turns.
+const CENTROID_SMOOTHING: f32 = 0.1;
+
+/// Rigid velocity in the object's own frame, about its origin.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BodyVelocity {
+    /// Rotation vector per second, rad/s.
+    pub angular_rad_s: Vec3,
+    pub linear_m_s: Vec3,
+}
+
+impl BodyVelocity {
+    /// The body-frame motion `before⁻¹ · after` spread over `dt`.
+    fn between(before: &Affine3A, after: &Affine3A, dt: Duration) -> Self {
+        let seconds = dt.as_secs_f32();
+        if seconds <= 0.0 {
+            return Self::default();
+        }
+        let delta = before.inverse() * *after;
+        Self {
+            angular_rad_s: Quat::from_mat3a(&delta.matrix3).to_scaled_axis() / seconds,
+            linear_m_s: Vec3::from(delta.translation) / seconds,
+        }
+    }
+
+    /// The body-frame motion over `dt`.
+    fn over(&self, dt: Duration) -> Affine3A {
+        let seconds = dt.as_secs_f32();
+        Affine3A::from_rotation_translation(
+            Quat::from_scaled_axis(self.angular_rad_s * seconds),
+            self.linear_m_s * seconds,
+        )
+    }
+}
+
+/// What fusing one cluster did to the object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Observed {
+    /// Pose kept (any motion was below the thresholds).
+    Still,
+    /// The object moved; the new `world_from_object`.
+    Moved(Affine3A),
+    /// Alignment failed; the fused state now holds only the new cluster.
+    Reset(IcpFailure),
+}
+
+/// One object's state.
+#[derive(Debug, Clone)]
+pub struct TrackedObject {
+    pub id: u64,
+    /// The fused moments, object frame.
+    pub grid: MomentGrid,
+    /// The same points in voxels `icp_coarse_factor` times wider, for coarse alignment.
+    coarse: MomentGrid,
+    pub change: ChangeTracker,
+    pub world_from_object: Affine3A,
+    object_from_world: Affine3A,
+    velocity: BodyVelocity,
+    /// When the pose last changed (or the object was created or reset), capture time.
+    last_pose_change: Duration,
+    pub last_seen: Duration,
+    pub frames_seen: u32,
+    /// Centroid of the recent clusters, object frame, smoothed over frames: association
+    /// predicts it, and alignment anchors the motion the surface cannot show to it.
+    centroid_in_object: Vec3,
+    pub viewpoint_in_object: Vec3,
+    pub points_fused: u64,
+    pub meshing_runs: u64,
+    pub last_meshed: Option<Duration>,
+}
+
+impl TrackedObject {
+    /// A new object from its first cluster (finite points, centroid given); its frame is
+    /// axis-aligned with the world with its origin at the centroid, which keeps alignment
+    /// well conditioned (rotations act about the object, not about a far world origin).
+    pub fn new(
+        id: u64,
+        points_in_world: &[Vec3],
+        centroid_in_world: Vec3,
+        capture_time: Duration,
+        viewpoint_in_world: Vec3,
+        config: &TrackConfig,
+    ) -> Self {
+        let mut object = Self {
+            id,
+            grid: MomentGrid::new(config.voxel_size_m),
+            coarse: MomentGrid::new(config.voxel_size_m * config.icp_coarse_factor as f32),
+            change: ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points),
+            world_from_object: Affine3A::IDENTITY,
+            object_from_world: Affine3A::IDENTITY,
+            velocity: BodyVelocity::default(),
+            last_pose_change: capture_time,
+            last_seen: capture_time,
+            frames_seen: 0,
+            centroid_in_object: Vec3::ZERO,
+            viewpoint_in_object: Vec3::ZERO,
+            points_fused: 0,
+            meshing_runs: 0,
+            last_meshed: None,
+        };
+        object.restart(Quat::IDENTITY, centroid_in_world, capture_time, config);
+        object.fuse(
+            points_in_world,
+            centroid_in_world,
+            capture_time,
+            viewpoint_in_world,
+        );
+        object
+    }
+
+    /// Where the object is expected at `capture_time`: the last pose moved on by its velocity.
+    pub fn predicted_world_from_object(&self, capture_time: Duration) -> Affine3A {
+        let dt = capture_time.saturating_sub(self.last_seen);
+        self.world_from_object * self.velocity.over(dt)
+    }
+
+    /// Where the next cluster's centroid is expected, world frame.
+    pub fn predicted_centroid(&self, capture_time: Duration) -> Vec3 {
+        self.predicted_world_from_object(capture_time)
+            .transform_point3(self.centroid_in_object)
+    }
+
+    /// Aligns a new cluster (finite points) to the fused model, updates the pose, fuses it.
+    pub fn observe(
+        &mut self,
+        points_in_world: &[Vec3],
+        centroid_in_world: Vec3,
+        capture_time: Duration,
+        viewpoint_in_world: Vec3,
+        config: &TrackConfig,
+        scratch: &mut IcpScratch,
+    ) -> Observed {
+        let predicted = self.predicted_world_from_object(capture_time);
+        let stride = points_in_world.len().div_ceil(config.icp_max_points).max(1);
+        let sample: Vec<Vec3> = points_in_world.iter().step_by(stride).copied().collect();
+        let aligned = self.align(&sample, centroid_in_world, predicted, config, scratch);
+        let outcome = match aligned {
+            Ok(object_from_world) => {
+                let estimate = object_from_world.inverse();
+                let delta = self.object_from_world * estimate;
+                let shift_m = Vec3::from(delta.translation).length();
+                let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
+                if shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad {
+                    let dt = capture_time.saturating_sub(self.last_pose_change);
+                    self.velocity = BodyVelocity::between(&self.world_from_object, &estimate, dt);
+                    self.set_pose(estimate);
+                    self.last_pose_change = capture_time;
+                    debug!(id = self.id, shift_m, turn_rad, "object moved");
+                    Observed::Moved(estimate)
+                } else {
+                    // Below the dead band: keep the pose and predict no motion, so noise
+                    // never accumulates into drift while slow motion still adds up against
+                    // the kept pose until it crosses a threshold.
+                    self.velocity = BodyVelocity::default();
+                    Observed::Still
+                }
+            }
+            Err(failure) => {
+                let rotation = Quat::from_mat3a(&self.world_from_object.matrix3);
+                self.restart(rotation, centroid_in_world, capture_time, config);
+                Observed::Reset(failure)
+            }
+        };
+        self.fuse(
+            points_in_world,
+            centroid_in_world,
+            capture_time,
+            viewpoint_in_world,
+        );
+        outcome
+    }
+
+    /// Aligns, cheapest first: the fine level alone from the prediction, kept if nearly all
+    /// points land on the fused surface (a static or steadily moving object); else coarse then
+    /// fine from the prediction; else coarse then fine from the prediction shifted so the
+    /// centroids agree (a sudden start or stop the velocity did not foresee). The coarse
+    /// level's planes, fitted over boxes centimetres wide, round off edges and corners, so it
+    /// runs only when the fine level cannot reach.
+    fn align(
+        &self,
+        points_in_world: &[Vec3],
+        centroid_in_world: Vec3,
+        predicted: Affine3A,
+        config: &TrackConfig,
+        scratch: &mut IcpScratch,
+    ) -> Result<Affine3A, IcpFailure> {
+        let levels = [
+            IcpLevel {
+                grid: &self.coarse,
+                iterations: config.icp_coarse_iterations,
+                reject_m: config.icp_reject_voxels * self.coarse.voxel_size_m(),
+            },
+            IcpLevel {
+                grid: &self.grid,
+                iterations: config.icp_fine_iterations,
+                reject_m: config.icp_reject_voxels * self.grid.voxel_size_m(),
+            },
+        ];
+        let settings = IcpSettings {
+            min_inliers: config.icp_min_inliers,
+            min_inlier_fraction: config.icp_min_inlier_fraction,
+            max_rms_m: config.icp_max_rms_m,
+            prior_weight: config.icp_prior_weight,
+            degenerate_ratio: config.icp_degenerate_ratio,
+        };
+        let anchor = Some(CentroidAnchor {
+            centroid_in_world,
+            expected_in_object: self.centroid_in_object,
+        });
+        scratch.start_object();
+        let guess = predicted.inverse();
+        let fine_only = align_to_grids(
+            &levels[1..],
+            points_in_world,
+            guess,
+            anchor,
+            &settings,
+            scratch,
+        );
+        if let Ok(a) = fine_only {
+            if a.inliers as f32 >= FAMILIAR_FRACTION * points_in_world.len() as f32 {
+                return Ok(a.object_from_world);
+            }
+        }
+        let offset = centroid_in_world - predicted.transform_point3(self.centroid_in_object);
+        let mut starts = vec![guess];
+        if offset.length() > levels[1].reject_m {
+            starts.push((Affine3A::from_translation(offset) * predicted).inverse());
+        }
+        let mut last = fine_only.map(|a| a.object_from_world);
+        for start in starts {
+            last = align_to_grids(&levels, points_in_world, start, anchor, &settings, scratch)
+                .map(|a| a.object_from_world);
+            if last.is_ok() {
+                break;
+            }
+        }
+        last
+    }
+
+    fn set_pose(&mut self, world_from_object: Affine3A) {
+        self.world_from_object = world_from_object;
+        self.object_from_world = world_from_object.inverse();
+    }
+
+    /// Empties the fused state and puts the object origin at `centroid_in_world`.
+    fn restart(
+        &mut self,
+        rotation: Quat,
+        centroid_in_world: Vec3,
+        capture_time: Duration,
+        config: &TrackConfig,
+    ) {
+        self.grid = MomentGrid::new(config.voxel_size_m);
+        self.coarse = MomentGrid::new(config.voxel_size_m * config.icp_coarse_factor as f32);
+        self.change = ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points);
+        self.velocity = BodyVelocity::default();
+        self.points_fused = 0;
+        self.last_pose_change = capture_time;
+        self.set_pose(Affine3A::from_rotation_translation(
+            rotation,
+            centroid_in_world,
+        ));
+    }
+
+    /// Adds the cluster to the fused state with the current pose.
+    fn fuse(
+        &mut self,
+        points_in_world: &[Vec3],
+        centroid_in_world: Vec3,
+        capture_time: Duration,
+        viewpoint_in_world: Vec3,
+    ) {
+        let mut points_added = 0;
+        for &p_in_world in points_in_world {
+            let p_in_object = self.object_from_world.transform_point3(p_in_world);
+            if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
+                let count = moments.count as u32;
+                self.change.note_point(&self.grid, cell, count);
+                self.coarse.add_point(p_in_object);
+                self.points_fused += 1;
+                points_added += 1;
+            }
+        }
+        let centroid_in_object = self.object_from_world.transform_point3(centroid_in_world);
+        self.centroid_in_object = if self.points_fused == points_added {
+            centroid_in_object
+        } else {
+            self.centroid_in_object
+                .lerp(centroid_in_object, CENTROID_SMOOTHING)
+        };
+        self.viewpoint_in_object = self.object_from_world.transform_point3(viewpoint_in_world);
+        self.last_seen = capture_time;
+        self.frames_seen = self.frames_seen.saturating_add(1);
+    }
+}

@@ -1,0 +1,278 @@
+//! The object map: every tracked object, updated frame by frame, in pipeline order: clean the
+//! clusters → expire tracks → associate → align and fuse → create tracks → (later, on the
+//! mesher's schedule) hand out mesh jobs.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use glam::{Affine3A, Vec3};
+use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tracing::{debug, info};
+
+use crate::associate::associate_greedy;
+use crate::config::{TrackConfig, TrackError};
+use crate::icp::IcpScratch;
+use crate::object::{Observed, TrackedObject};
+
+/// One frame's segmentation: world points per object seen.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameClusters {
+    /// Capture time of the frame (the sensor's clock).
+    pub capture_time: Duration,
+    /// Sensor position, world frame, metres.
+    pub viewpoint_m: Vec3,
+    /// World points of each segmented object, metres. Non-finite points are skipped.
+    pub clusters: Vec<Vec<Vec3>>,
+}
+
+/// What one frame did to the map.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameReport {
+    /// New objects, by id.
+    pub created: Vec<u64>,
+    /// Objects not seen for `leave_after`, now gone.
+    pub removed: Vec<u64>,
+    /// Objects that moved, with their new `world_from_object` (republish the last mesh there;
+    /// no re-meshing needed).
+    pub moved: Vec<(u64, Affine3A)>,
+    /// Objects whose alignment failed: their fused state restarted from this frame's cluster
+    /// (same id; their next mesh replaces the old one).
+    pub reset: Vec<u64>,
+    /// The object each input cluster went to, in input order; `None` for clusters ignored
+    /// (fewer than `min_cluster_points` finite points).
+    pub cluster_ids: Vec<Option<u64>>,
+}
+
+/// One object to mesh: its fused state, a copy the mesher owns.
+#[derive(Debug, Clone)]
+pub struct MeshJob {
+    pub object_id: u64,
+    /// Fused moments, object frame; mesh with `tacmesh_reconstruct::surface::mesh_moment_grid`.
+    pub grid: MomentGrid,
+    pub world_from_object: Affine3A,
+    /// The newest frame's sensor position, object frame (for viewpoint orientation; an object
+    /// turned far from its first view has been seen from several sides and is better oriented
+    /// by propagation).
+    pub viewpoint_in_object: Vec3,
+    /// Capture time of the newest points in `grid`.
+    pub newest_capture: Duration,
+}
+
+/// One object, as the daemon and its logs see it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectSummary {
+    pub id: u64,
+    pub world_from_object: Affine3A,
+    /// Points fused since the object was created or last reset.
+    pub points_fused: u64,
+    /// Voxels of the fused grid holding any point (memory follows this, not the frame count).
+    pub cells: usize,
+    pub meshing_runs: u64,
+    /// How much of the fused state changed since the last meshing (see `remesh_min_change`).
+    pub changed_fraction: f32,
+    pub frames_seen: u32,
+    pub last_seen: Duration,
+    /// Seen in `confirm_frames` frames, so offered for meshing.
+    pub confirmed: bool,
+}
+
+/// Every tracked object; ids start at 1 and are never reused.
+#[derive(Debug)]
+pub struct ObjectMap {
+    config: TrackConfig,
+    objects: BTreeMap<u64, TrackedObject>,
+    next_id: u64,
+    meshing_runs: u64,
+    scratch: IcpScratch,
+}
+
+/// A cluster's finite points and centroid, or `None` if too few.
+fn clean_cluster(points: &[Vec3], min_points: usize) -> Option<(Vec<Vec3>, Vec3)> {
+    let finite: Vec<Vec3> = points.iter().copied().filter(|p| p.is_finite()).collect();
+    if finite.is_empty() || finite.len() < min_points {
+        return None;
+    }
+    let sum = finite
+        .iter()
+        .fold(glam::DVec3::ZERO, |s, p| s + p.as_dvec3());
+    let centroid = (sum / finite.len() as f64).as_vec3();
+    Some((finite, centroid))
+}
+
+impl ObjectMap {
+    /// An empty map; fails on an invalid config.
+    pub fn new(config: TrackConfig) -> Result<Self, TrackError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            objects: BTreeMap::new(),
+            next_id: 1,
+            meshing_runs: 0,
+            scratch: IcpScratch::default(),
+        })
+    }
+
+    pub fn config(&self) -> &TrackConfig {
+        &self.config
+    }
+
+    /// Associates the frame's clusters with tracks, aligns and fuses each matched cluster into
+    /// its object (cost proportional to the cluster, not the object's history), creates tracks
+    /// for the rest and removes tracks not seen for `leave_after`.
+    pub fn integrate(&mut self, frame: &FrameClusters) -> FrameReport {
+        let now = frame.capture_time;
+        let mut report = FrameReport {
+            cluster_ids: vec![None; frame.clusters.len()],
+            ..Default::default()
+        };
+
+        let cleaned: Vec<Option<(Vec<Vec3>, Vec3)>> = frame
+            .clusters
+            .iter()
+            .map(|c| clean_cluster(c, self.config.min_cluster_points))
+            .collect();
+
+        let leave_after = self.config.leave_after;
+        let expired: Vec<u64> = self
+            .objects
+            .values()
+            .filter(|o| now.saturating_sub(o.last_seen) > leave_after)
+            .map(|o| o.id)
+            .collect();
+        for id in expired {
+            self.objects.remove(&id);
+            info!(id, "object left");
+            report.removed.push(id);
+        }
+
+        let ids: Vec<u64> = self.objects.keys().copied().collect();
+        let predicted: Vec<Vec3> = self
+            .objects
+            .values()
+            .map(|o| o.predicted_centroid(now))
+            .collect();
+        let centroids: Vec<Option<Vec3>> = cleaned
+            .iter()
+            .map(|c| c.as_ref().map(|(_, centroid)| *centroid))
+            .collect();
+        let pairs = associate_greedy(&centroids, &predicted, self.config.match_distance_m);
+
+        for &(ci, ti) in &pairs {
+            let id = ids[ti];
+            let (Some((points, centroid)), Some(object)) =
+                (cleaned[ci].as_ref(), self.objects.get_mut(&id))
+            else {
+                continue;
+            };
+            report.cluster_ids[ci] = Some(id);
+            match object.observe(
+                points,
+                *centroid,
+                now,
+                frame.viewpoint_m,
+                &self.config,
+                &mut self.scratch,
+            ) {
+                Observed::Still => {}
+                Observed::Moved(world_from_object) => report.moved.push((id, world_from_object)),
+                Observed::Reset(why) => {
+                    info!(id, %why, "object reset: its fused state restarts from this frame");
+                    report.reset.push(id);
+                }
+            }
+        }
+
+        for (ci, cluster) in cleaned.iter().enumerate() {
+            let Some((points, centroid)) = cluster else {
+                continue;
+            };
+            if report.cluster_ids[ci].is_some() {
+                continue;
+            }
+            let id = self.next_id;
+            self.next_id += 1;
+            let object =
+                TrackedObject::new(id, points, *centroid, now, frame.viewpoint_m, &self.config);
+            info!(id, points = points.len(), centroid = %centroid, "object appeared");
+            self.objects.insert(id, object);
+            report.created.push(id);
+            report.cluster_ids[ci] = Some(id);
+        }
+
+        debug!(
+            capture_s = now.as_secs_f64(),
+            clusters = frame.clusters.len(),
+            objects = self.objects.len(),
+            moved = report.moved.len(),
+            "frame integrated"
+        );
+        report
+    }
+
+    /// The confirmed objects whose fused state changed enough since their last meshing
+    /// (`remesh_min_change`) and whose last meshing is at least `remesh_interval` before
+    /// `now_capture`; each is marked clean and counted as a meshing run.
+    pub fn take_mesh_jobs(&mut self, now_capture: Duration) -> Vec<MeshJob> {
+        let mut jobs = Vec::new();
+        for object in self.objects.values_mut() {
+            if object.frames_seen < self.config.confirm_frames || object.change.changed_cells() == 0
+            {
+                continue;
+            }
+            let due = object
+                .last_meshed
+                .is_none_or(|at| now_capture.saturating_sub(at) >= self.config.remesh_interval);
+            let changed = !object.change.meshed()
+                || object.change.changed_fraction() >= self.config.remesh_min_change;
+            if !(due && changed) {
+                continue;
+            }
+            debug!(
+                id = object.id,
+                changed_fraction = object.change.changed_fraction(),
+                cells = object.grid.len(),
+                "mesh job"
+            );
+            object.change.mark_meshed(&object.grid);
+            object.meshing_runs += 1;
+            object.last_meshed = Some(now_capture);
+            self.meshing_runs += 1;
+            jobs.push(MeshJob {
+                object_id: object.id,
+                grid: object.grid.clone(),
+                world_from_object: object.world_from_object,
+                viewpoint_in_object: object.viewpoint_in_object,
+                newest_capture: object.last_seen,
+            });
+        }
+        jobs
+    }
+
+    /// Every object, by id.
+    pub fn objects(&self) -> impl Iterator<Item = ObjectSummary> + '_ {
+        self.objects.values().map(|o| ObjectSummary {
+            id: o.id,
+            world_from_object: o.world_from_object,
+            points_fused: o.points_fused,
+            cells: o.grid.len(),
+            meshing_runs: o.meshing_runs,
+            changed_fraction: o.change.changed_fraction(),
+            frames_seen: o.frames_seen,
+            last_seen: o.last_seen,
+            confirmed: o.frames_seen >= self.config.confirm_frames,
+        })
+    }
+
+    /// Meshing runs handed out over the map's life.
+    pub fn meshing_runs(&self) -> u64 {
+        self.meshing_runs
+    }
+
+    pub fn len(&self) -> usize {
+        self.objects.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.objects.is_empty()
+    }
+}
