@@ -102,11 +102,18 @@ impl Perception {
         counters.record(Stage::Deproject, started.elapsed());
 
         let started = Instant::now();
+        let stride = shared.config.pipeline.segment_stride.max(1);
+        let strided = organised.is_some() && stride > 1;
         let config = SegmentConfig {
             viewpoint_m: viewpoint,
+            // Cluster sizes count segmented points: one in stride² of an organised frame.
+            min_cluster_points: if strided {
+                (self.segment.min_cluster_points / (stride * stride) as usize).max(20)
+            } else {
+                self.segment.min_cluster_points
+            },
             ..self.segment.clone()
         };
-        let stride = shared.config.pipeline.segment_stride.max(1);
         let clusters = match organised {
             Some((width, height)) if stride > 1 => {
                 strided_clusters(&points, width, height, stride, &config, &self.plane_hints)
