@@ -92,6 +92,26 @@ fn main() {
             &frame.points_in_world,
             frame.sensor_in_world,
         );
+        // The daemon's path: the organised frame, every 2nd pixel in each direction.
+        let camera = tacmesh_sim::SimulatedDepthCamera::tabletop(7);
+        let organised = camera
+            .render(0, Duration::ZERO)
+            .deproject_organised(camera.config().max_range_m)
+            .points_in_world;
+        let (width, height) = (
+            camera.config().intrinsics.width as usize,
+            camera.config().intrinsics.height as usize,
+        );
+        let strided: Vec<Vec3> = (0..height)
+            .step_by(2)
+            .flat_map(|v| (0..width).step_by(2).map(move |u| v * width + u))
+            .map(|i| organised[i])
+            .collect();
+        report(
+            "simulated tabletop, every 2nd pixel (the daemon's path)",
+            &strided,
+            frame.sensor_in_world,
+        );
         for name in ["mosd/osd_test0.pcd", "mosd/osd_test35.pcd"] {
             let path = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("../../shared/data/pointclouds")

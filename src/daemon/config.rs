@@ -55,7 +55,9 @@ pub struct SocketSection {
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineSection {
     /// Frames held between the sensor and the pipeline; when full, the oldest is dropped.
-    /// Default 2: enough to absorb one slow frame, small enough to keep latency low.
+    /// Default 1: the pipeline always takes the newest frame, so a frame never waits behind
+    /// an older one (measured with `cargo bench --bench daemon`: 2 added a frame's processing
+    /// time to the p50 frame-to-publish latency whenever the pipeline ran near capacity).
     pub ring_capacity: usize,
     /// Depths beyond this many metres are invalid. Default 4.0.
     pub max_range_m: f32,
@@ -68,7 +70,7 @@ pub struct PipelineSection {
 impl Default for PipelineSection {
     fn default() -> Self {
         Self {
-            ring_capacity: 2,
+            ring_capacity: 1,
             max_range_m: 4.0,
             segment_stride: 2,
         }
