@@ -7,6 +7,8 @@
 //!   `DynamicScene` whose objects never move.
 //! - [`DynamicScene::build_bvh`] → [`DynamicSceneBvh`]: each object's ray-casting tree built
 //!   once; [`DynamicSceneBvh::at`] poses the objects present at an instant as a [`SceneBvh`].
+//!   The camera splits the same index in two: the static objects once
+//!   (`DynamicSceneBvh::static_part`), the others per frame (`DynamicSceneBvh::moving_at`).
 //!
 //! Scene time: `loop_s`, if set, wraps every time `t` given here to `t mod loop_s` first, so a
 //! demo runs for ever with objects coming and going.
@@ -143,6 +145,7 @@ impl DynamicScene {
                 })?;
                 Ok(IndexedObject {
                     id: object.id,
+                    is_static: object.is_static(),
                     motion: (fixed_pose.is_none()).then(|| object.motion.clone()),
                     appear_s: object.appear_s,
                     leave_s: object.leave_s,
@@ -195,6 +198,8 @@ pub struct DynamicSceneBvh {
 #[derive(Debug, Clone)]
 struct IndexedObject {
     id: u32,
+    /// [`DynamicObject::is_static`]: always present and never moving.
+    is_static: bool,
     /// `None`: fixed, the tree is in world coordinates.
     motion: Option<Motion>,
     appear_s: Option<f32>,
@@ -206,19 +211,46 @@ impl DynamicSceneBvh {
     /// The objects present at scene time `t_s` (wrapped by `loop_s`), posed for ray casting.
     /// Cheap: no tree is rebuilt, each moving object only gets its pose and world box.
     pub fn at(&self, t_s: f32) -> SceneBvh {
+        self.posed_at(t_s, |_| true).0
+    }
+
+    /// As [`at`](Self::at), with each object's index in the scene (the order a full cast
+    /// breaks ties in).
+    #[cfg(test)]
+    pub(crate) fn indexed_at(&self, t_s: f32) -> (SceneBvh, Vec<u32>) {
+        self.posed_at(t_s, |_| true)
+    }
+
+    /// The static objects ([`DynamicObject::is_static`]) with their scene indices, the same
+    /// at every instant: what they show can be computed once.
+    pub(crate) fn static_part(&self) -> (SceneBvh, Vec<u32>) {
+        self.posed_at(0.0, |object| object.is_static)
+    }
+
+    /// The objects present at scene time `t_s` that are not static, posed, with their scene
+    /// indices: with [`static_part`](Self::static_part), the whole of [`at`](Self::at).
+    pub(crate) fn moving_at(&self, t_s: f32) -> (SceneBvh, Vec<u32>) {
+        self.posed_at(t_s, |object| !object.is_static)
+    }
+
+    /// The objects present at `t_s` that `keep` accepts, in scene order, posed, and the
+    /// index in the scene of each.
+    fn posed_at(&self, t_s: f32, keep: impl Fn(&IndexedObject) -> bool) -> (SceneBvh, Vec<u32>) {
         let t_s = wrap_time_s(self.loop_s, f64::from(t_s));
-        let posed = self
-            .objects
-            .iter()
-            .filter(|object| present(object.appear_s, object.leave_s, t_s))
-            .map(|object| {
+        let (indices, posed) = (0u32..)
+            .zip(&self.objects)
+            .filter(|(_, object)| keep(object) && present(object.appear_s, object.leave_s, t_s))
+            .map(|(index, object)| {
                 let world_from_tree = object.motion.as_ref().map_or(Affine3A::IDENTITY, |motion| {
                     motion.world_from_object_at(t_s)
                 });
-                (object.id, Arc::clone(&object.trees), world_from_tree)
+                (
+                    index,
+                    (object.id, Arc::clone(&object.trees), world_from_tree),
+                )
             })
-            .collect();
-        SceneBvh::from_posed(posed)
+            .unzip();
+        (SceneBvh::from_posed(posed), indices)
     }
 }
 
@@ -320,6 +352,31 @@ mod tests {
         assert!(down(0.0, 3.0).is_none());
         let d = bvh.at(3.0).distance_to_surface(Vec3::new(3.0, 0.0, 1.0));
         assert!((d - 0.5).abs() < 1e-5, "{d}");
+    }
+
+    #[test]
+    fn static_part_and_moving_objects_split_the_scene() {
+        let mut scene = DynamicScene::from(Scene::tabletop());
+        scene.objects.insert(1, sliding_cube(None, None));
+        // Fixed but not always present: not static either.
+        let mut late = sliding_cube(Some(2.0), None);
+        late.id = 6;
+        late.motion = Motion::Fixed(Affine3A::IDENTITY);
+        scene.objects.push(late);
+        let bvh = scene.build_bvh().unwrap();
+        let ids = |bvh: &SceneBvh| bvh.object_ids().collect::<Vec<_>>();
+        let (still, still_indices) = bvh.static_part();
+        assert_eq!(
+            (ids(&still), still_indices),
+            (vec![0, 1, 2, 3], vec![0, 2, 3, 4])
+        );
+        let (moving, moving_indices) = bvh.moving_at(1.0);
+        assert_eq!((ids(&moving), moving_indices), (vec![5], vec![1]));
+        let (moving, moving_indices) = bvh.moving_at(3.0);
+        assert_eq!((ids(&moving), moving_indices), (vec![5, 6], vec![1, 5]));
+        let (all, all_indices) = bvh.indexed_at(3.0);
+        assert_eq!(ids(&all), ids(&bvh.at(3.0)));
+        assert_eq!(all_indices, [0, 1, 2, 3, 4, 5]);
     }
 
     #[test]

@@ -277,10 +277,27 @@ impl SceneBvh {
         max_time_of_impact: f32,
         candidates: impl IntoIterator<Item = usize>,
     ) -> Option<RayHit> {
+        self.cast_nearest_among(origin, dir, max_time_of_impact, candidates)
+            .map(|(i, t)| RayHit {
+                object_id: self.objects[i].id,
+                time_of_impact: t,
+            })
+    }
+
+    /// As [`cast_ray_among`](Self::cast_ray_among), the hit as (object index, time of
+    /// impact); on a tie the earlier index wins.
+    pub(crate) fn cast_nearest_among(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_time_of_impact: f32,
+        candidates: impl IntoIterator<Item = usize>,
+    ) -> Option<(usize, f32)> {
         let inv_dir = dir.recip();
-        let mut best: Option<RayHit> = None;
+        let mut best = None;
         let mut max_t = max_time_of_impact;
-        for object in candidates.into_iter().map(|i| &self.objects[i]) {
+        for i in candidates {
+            let object = &self.objects[i];
             let rays = &object.trees.rays;
             let t = match &object.pose {
                 None => rays.cast_ray(origin, dir, inv_dir, max_t),
@@ -297,10 +314,7 @@ impl SceneBvh {
             };
             if let Some(t) = t {
                 max_t = t;
-                best = Some(RayHit {
-                    object_id: object.id,
-                    time_of_impact: t,
-                });
+                best = Some((i, t));
             }
         }
         best

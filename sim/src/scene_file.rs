@@ -389,6 +389,7 @@ impl Context<'_> {
             seed: raw.seed.unwrap_or(defaults.seed),
             fps,
             rate_fps: raw.paced.unwrap_or(true).then_some(fps),
+            render_threads: defaults.render_threads,
         };
         check_config(&config).map_err(|err| fail(err.to_string()))?;
         Ok(config)
