@@ -1210,12 +1210,12 @@ mod tests {
             599,
             600,
             750,
-            900 + 160,
+            1080 + 160,
         ];
         for frame in frames {
             let ids = camera.render_ids(frame);
             assert!(ids.contains(&Some(4)), "frame {frame}: no cone");
-            let cylinder = (150..600).contains(&(frame % 900));
+            let cylinder = (150..600).contains(&(frame % 1080));
             assert_eq!(ids.contains(&Some(5)), cylinder, "frame {frame}: cylinder");
         }
         assert_cache_matches_full_cast(&camera, &frames);
@@ -1472,10 +1472,10 @@ mod tests {
         let camera = SceneFile::demo().into_camera().unwrap();
         assert_eq!(camera.scene_time_s(0), 0.0);
         assert_eq!(camera.scene_time_s(45), 1.5);
-        // 30 fps and loop_s = 30: frame 900 starts the second lap.
-        assert_eq!(camera.scene_time_s(900), 0.0);
-        assert_eq!(camera.scene_time_s(915), 0.5);
-        assert_eq!(camera.scene_at(915), camera.scene_at(15));
+        // 30 fps and loop_s = 36: frame 1080 starts the second lap.
+        assert_eq!(camera.scene_time_s(1080), 0.0);
+        assert_eq!(camera.scene_time_s(1095), 0.5);
+        assert_eq!(camera.scene_at(1095), camera.scene_at(15));
         let ids = |frame| {
             camera
                 .scene_at(frame)
@@ -1486,7 +1486,7 @@ mod tests {
         assert_eq!(ids(0), [0, 1, 2, 3, 4]);
         assert_eq!(ids(300), [0, 1, 2, 3, 4, 5]);
         assert_eq!(ids(600), [0, 1, 2, 3, 4]);
-        assert_eq!(ids(900 + 300), [0, 1, 2, 3, 4, 5]);
+        assert_eq!(ids(1080 + 300), [0, 1, 2, 3, 4, 5]);
     }
 
     #[test]

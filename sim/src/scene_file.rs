@@ -9,7 +9,7 @@
 //! The format is documented key by key in `scenes/demo.toml`. In short:
 //!
 //! ```toml
-//! loop_s = 30.0                     # optional: scene time wraps to t mod loop_s
+//! loop_s = 36.0                     # optional: scene time wraps to t mod loop_s
 //! [camera]                          # every key optional
 //! width = 640                       # also height, fx, fy, cx, cy (pixels)
 //! fps = 30.0                        # frame k shows scene time k / fps
@@ -641,7 +641,7 @@ mod tests {
             SceneFile::load(scenes_dir().join("demo.toml")).unwrap()
         );
         assert_eq!(demo.name, "demo");
-        assert_eq!(demo.scene.loop_s, Some(30.0));
+        assert_eq!(demo.scene.loop_s, Some(36.0));
         assert_eq!(demo.camera.fps, 30.0);
         assert_eq!(demo.camera.rate_fps, Some(30.0));
         assert_eq!(demo.camera.intrinsics, DEFAULT_INTRINSICS);
@@ -660,7 +660,13 @@ mod tests {
         assert!((cone_x(7.0) - cone_x(6.0) + 0.1).abs() < 1e-5);
         let present = |t_s| demo.scene.objects_at(t_s).iter().any(|o| o.id == 5);
         assert!(!present(4.9) && present(5.0) && present(19.9) && !present(20.0));
-        assert!(present(35.0), "loop_s brings it back");
+        let wrapped = demo.scene.wrap_time_s(41.0);
+        assert!(
+            present(wrapped),
+            "loop_s brings it back (t 41 s -> {wrapped} s)"
+        );
+        // The wrap is a whole number of the cone's 12 s round trips: no jump.
+        assert!((cone_x(demo.scene.wrap_time_s(36.0)) - cone_x(0.0)).abs() < 1e-6);
         let camera = demo.into_camera().unwrap();
         assert_eq!(tacmesh_source::DepthSource::name(&camera), "sim:demo");
     }

@@ -304,6 +304,39 @@ impl TrackedObject {
     }
 
     /// Adds the cluster to the fused state with the current pose.
+    /// The fraction of `points_in_world` that land in or beside (3×3×3) a voxel of the fused
+    /// model at the current pose: how much of a cluster is a piece of this object.
+    pub fn coverage(&self, points_in_world: &[Vec3]) -> f32 {
+        if points_in_world.is_empty() {
+            return 0.0;
+        }
+        let covered = points_in_world
+            .iter()
+            .filter(|&&p| {
+                let cell = self
+                    .grid
+                    .cell_of(self.object_from_world.transform_point3(p));
+                self.grid.neighbourhood(cell, 1).count > 0.0
+            })
+            .count();
+        covered as f32 / points_in_world.len() as f32
+    }
+
+    /// Fuses a fragment of this object (a piece of it that segmentation split off, such as a
+    /// side face seen at a grazing angle) at the current pose. Pose, velocity and centroid are
+    /// left to the main cluster.
+    pub fn fuse_fragment(&mut self, points_in_world: &[Vec3]) {
+        for &p_in_world in points_in_world {
+            let p_in_object = self.object_from_world.transform_point3(p_in_world);
+            if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
+                let count = moments.count as u32;
+                self.change.note_point(&self.grid, cell, count);
+                self.coarse.add_point(p_in_object);
+                self.points_fused += 1;
+            }
+        }
+    }
+
     fn fuse(
         &mut self,
         points_in_world: &[Vec3],

@@ -14,6 +14,10 @@ use crate::config::{TrackConfig, TrackError};
 use crate::icp::IcpScratch;
 use crate::object::{Observed, TrackedObject};
 
+/// A cluster no track claimed joins the object whose fused surface holds at least this
+/// fraction of its points, instead of becoming a new object.
+const FRAGMENT_COVERAGE: f32 = 0.5;
+
 /// One frame's segmentation: world points per object seen.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameClusters {
@@ -188,6 +192,28 @@ impl ObjectMap {
             };
             if report.cluster_ids[ci].is_some() {
                 continue;
+            }
+            // Segmentation sometimes splits a piece off an object (a side face seen at a
+            // grazing angle, sampled too sparsely to bridge the gap). A leftover cluster that
+            // mostly lies on an object's fused surface is that piece, not a new object.
+            let host = self
+                .objects
+                .values()
+                .map(|o| (o.coverage(points), o.id))
+                .filter(|&(coverage, _)| coverage >= FRAGMENT_COVERAGE)
+                .max_by(|a, b| a.0.total_cmp(&b.0));
+            if let Some((coverage, id)) = host {
+                if let Some(object) = self.objects.get_mut(&id) {
+                    object.fuse_fragment(points);
+                    debug!(
+                        id,
+                        points = points.len(),
+                        coverage,
+                        "fragment fused into object"
+                    );
+                    report.cluster_ids[ci] = Some(id);
+                    continue;
+                }
             }
             let id = self.next_id;
             self.next_id += 1;

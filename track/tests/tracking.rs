@@ -395,3 +395,30 @@ fn integration_cost_per_frame() {
         tail[tail.len() - 1]
     );
 }
+
+/// Segmentation sometimes splits a side face off an object; that piece joins the object
+/// instead of flickering in as a new one. A separate object beside it is still new.
+#[test]
+fn split_off_fragment_joins_its_object() {
+    let mut rng = rng(9);
+    let mut map = map();
+    let pose = at(0.0, 0.0, 0.6);
+    for i in 0..10 {
+        map.integrate(&frame(
+            i,
+            vec![view(CUBE, pose, Vec3::ZERO, 2000, SIGMA_M, &mut rng)],
+        ));
+    }
+    // This frame the cube's points with x > 0.04 come as a cluster of their own (their
+    // centroid is too far from the cube's to be associated), and a second cube stands 0.3 m
+    // away.
+    let points = view(CUBE, pose, Vec3::ZERO, 2000, SIGMA_M, &mut rng);
+    let (fragment, main): (Vec<Vec3>, Vec<Vec3>) = points.into_iter().partition(|p| p.x > 0.04);
+    assert!(fragment.len() > 50, "{} fragment points", fragment.len());
+    let other = view(CUBE, at(0.3, 0.0, 0.6), Vec3::ZERO, 2000, SIGMA_M, &mut rng);
+    let report = map.integrate(&frame(10, vec![main, fragment, other]));
+    assert_eq!(report.cluster_ids[0], Some(1));
+    assert_eq!(report.cluster_ids[1], Some(1), "{report:?}");
+    assert_eq!(report.created, vec![2]);
+    assert_eq!(map.len(), 2);
+}
