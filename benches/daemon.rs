@@ -62,6 +62,11 @@ fn main() {
     let mut first_stats: Option<(Instant, Stats)> = None;
     let (mut upserts, mut removes) = (0u64, 0u64);
     let mut ages_ms: Vec<f64> = Vec::new();
+    // A moved object is republished with the same triangles and report; anything else is a
+    // new mesh. Their ages differ: a move is published by the frame path, a mesh by the mesher.
+    let mut last_report: std::collections::HashMap<u64, (usize, tacmesh::protocol::SimplifyStats)> =
+        std::collections::HashMap::new();
+    let (mut moved_ages_ms, mut mesh_ages_ms): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
     loop {
         match subscription.next_message() {
             Ok(Message::Upsert(upsert)) => {
@@ -70,6 +75,12 @@ fn main() {
                     .as_nanos()
                     .saturating_sub(upsert.capture_time_ns as u128);
                 ages_ms.push(age as f64 / 1e6);
+                let key = (upsert.mesh.triangles.len(), upsert.report);
+                if last_report.insert(upsert.object_id, key) == Some(key) {
+                    moved_ages_ms.push(age as f64 / 1e6);
+                } else {
+                    mesh_ages_ms.push(age as f64 / 1e6);
+                }
             }
             Ok(Message::Remove { .. }) => removes += 1,
             Ok(Message::Stats(stats)) => {
@@ -96,13 +107,15 @@ fn main() {
     let processed_fps =
         ((s1.frames_in - s1.frames_dropped) - (s0.frames_in - s0.frames_dropped)) as f64 / span_s;
     let bytes_per_s = (s1.bytes_sent - s0.bytes_sent) as f64 / span_s;
-    ages_ms.sort_by(f64::total_cmp);
-    let pct = |q: f64| {
-        ages_ms
-            .get(((ages_ms.len() as f64 * q).ceil() as usize).saturating_sub(1))
+    for ages in [&mut ages_ms, &mut moved_ages_ms, &mut mesh_ages_ms] {
+        ages.sort_by(f64::total_cmp);
+    }
+    let pct_of = |ages: &[f64], q: f64| {
+        ages.get(((ages.len() as f64 * q).ceil() as usize).saturating_sub(1))
             .copied()
             .unwrap_or(0.0)
     };
+    let pct = |q: f64| pct_of(&ages_ms, q);
 
     println!("\n## tacmesh run, {sensor}, {seconds:.0} s (exit {status})\n");
     println!("| measure | value |\n|---|---|");
@@ -133,5 +146,17 @@ fn main() {
         "| subscriber: data age at arrival p50 / p99 | {:.1} / {:.1} ms |",
         pct(0.5),
         pct(0.99)
+    );
+    println!(
+        "| — of {} new meshes (mesher) p50 / p99 | {:.1} / {:.1} ms |",
+        mesh_ages_ms.len(),
+        pct_of(&mesh_ages_ms, 0.5),
+        pct_of(&mesh_ages_ms, 0.99)
+    );
+    println!(
+        "| — of {} moves (same mesh, new pose) p50 / p99 | {:.1} / {:.1} ms |",
+        moved_ages_ms.len(),
+        pct_of(&moved_ages_ms, 0.5),
+        pct_of(&moved_ages_ms, 0.99)
     );
 }

@@ -108,6 +108,9 @@ pub struct MeshSection {
     pub max_residual_m: f32,
     /// Fit the simplified vertices to the fused data (restores corners). Default true.
     pub fit_to_data: bool,
+    /// Threads meshing objects side by side. Default 2: when several objects change at
+    /// once, the second keeps their new meshes from queueing behind each other.
+    pub workers: usize,
 }
 
 impl Default for MeshSection {
@@ -115,6 +118,7 @@ impl Default for MeshSection {
         Self {
             max_residual_m: 0.004,
             fit_to_data: true,
+            workers: 2,
         }
     }
 }
@@ -201,6 +205,13 @@ impl DaemonConfig {
                 key: "pipeline.ring_capacity",
                 value: self.pipeline.ring_capacity.to_string(),
                 expected: "1 to 64 frames",
+            });
+        }
+        if !(1..=16).contains(&self.mesh.workers) {
+            return Err(ConfigError::OutOfRange {
+                key: "mesh.workers",
+                value: self.mesh.workers.to_string(),
+                expected: "1 to 16 threads",
             });
         }
         if !(1..=16).contains(&self.pipeline.segment_stride) {

@@ -17,7 +17,9 @@ use crate::pipeline::mesh_fused_grid;
 
 #[derive(Default)]
 struct Queue {
-    jobs: BTreeMap<u64, MeshJob>,
+    /// Per object: the order in which it was first queued, and its newest job.
+    jobs: BTreeMap<u64, (u64, MeshJob)>,
+    next_seq: u64,
     closed: bool,
 }
 
@@ -32,7 +34,14 @@ impl MeshQueue {
     /// Queues a job, replacing a waiting job of the same object.
     pub fn submit(&self, job: MeshJob) {
         let mut queue = crate::lock(&self.queue);
-        queue.jobs.insert(job.object_id, job);
+        let seq = queue.next_seq;
+        queue.next_seq += 1;
+        // A newer job replaces the waiting one but keeps its place in line.
+        let place = queue
+            .jobs
+            .get(&job.object_id)
+            .map_or(seq, |(place, _)| *place);
+        queue.jobs.insert(job.object_id, (place, job));
         self.ready.notify_one();
     }
 
@@ -56,15 +65,19 @@ impl MeshQueue {
         self.ready.notify_all();
     }
 
-    /// The oldest-queued object's job (lowest id first among those waiting), or `None` once
-    /// closed.
+    /// The job of the object that has waited longest, or `None` once closed.
     fn take(&self) -> Option<MeshJob> {
         let mut queue = crate::lock(&self.queue);
         loop {
             if queue.closed {
                 return None;
             }
-            if let Some((_, job)) = queue.jobs.pop_first() {
+            let oldest = queue
+                .jobs
+                .iter()
+                .min_by_key(|(_, (place, _))| *place)
+                .map(|(&id, _)| id);
+            if let Some((_, job)) = oldest.and_then(|id| queue.jobs.remove(&id)) {
                 return Some(job);
             }
             queue = self
@@ -132,4 +145,44 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         &shared.publisher,
         counters,
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tacmesh_reconstruct::moment_grid::MomentGrid;
+
+    fn job(object_id: u64, capture_ms: u64) -> MeshJob {
+        MeshJob {
+            object_id,
+            grid: MomentGrid::new(0.01),
+            world_from_object: glam::Affine3A::IDENTITY,
+            viewpoint_in_object: glam::Vec3::ZERO,
+            newest_capture: std::time::Duration::from_millis(capture_ms),
+        }
+    }
+
+    #[test]
+    fn jobs_come_out_oldest_first_and_a_newer_job_keeps_its_place() {
+        let queue = MeshQueue::default();
+        queue.submit(job(7, 1));
+        queue.submit(job(3, 2));
+        queue.submit(job(7, 3));
+        assert_eq!(queue.len(), 2, "one job per object");
+        let first = queue.take().unwrap();
+        assert_eq!((first.object_id, first.newest_capture.as_millis()), (7, 3));
+        assert_eq!(queue.take().unwrap().object_id, 3);
+        assert!(queue.is_empty());
+    }
+
+    #[test]
+    fn cancel_and_close() {
+        let queue = MeshQueue::default();
+        queue.submit(job(1, 1));
+        queue.submit(job(2, 1));
+        queue.cancel(1);
+        assert_eq!(queue.len(), 1);
+        queue.close();
+        assert!(queue.take().is_none(), "closed: waiting jobs are dropped");
+    }
 }

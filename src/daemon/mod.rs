@@ -114,7 +114,7 @@ pub struct Daemon {
     shared: Arc<Shared>,
     source: Option<JoinHandle<()>>,
     perception: Option<JoinHandle<()>>,
-    mesher: Option<JoinHandle<()>>,
+    meshers: Vec<JoinHandle<()>>,
     started: Instant,
 }
 
@@ -148,7 +148,7 @@ impl Daemon {
             shared: Arc::clone(&shared),
             source: None,
             perception: None,
-            mesher: None,
+            meshers: Vec::new(),
             started: Instant::now(),
         };
         let spawn = |name: &'static str, body: Box<dyn FnOnce() + Send>| {
@@ -157,8 +157,12 @@ impl Daemon {
                 .spawn(body)
                 .map_err(|source| DaemonError::Spawn { name, source })
         };
-        let s = Arc::clone(&shared);
-        daemon.mesher = Some(spawn("mesher", Box::new(move || mesher::run_mesher(&s)))?);
+        for _ in 0..shared.config.mesh.workers {
+            let s = Arc::clone(&shared);
+            daemon
+                .meshers
+                .push(spawn("mesher", Box::new(move || mesher::run_mesher(&s)))?);
+        }
         let s = Arc::clone(&shared);
         daemon.perception = Some(spawn(
             "perception",
@@ -217,7 +221,7 @@ impl Daemon {
             join(perception, "perception");
         }
         self.shared.mesh_queue.close();
-        if let Some(mesher) = self.mesher.take() {
+        for mesher in self.meshers.drain(..) {
             join(mesher, "mesher");
         }
         // A source blocked in a device read may not return soon; it holds only its own
