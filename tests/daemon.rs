@@ -309,6 +309,25 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         assert!(faces <= 300, "object {}: {faces} faces", object.id);
     }
 
+    // `tacmesh subscribe --count N --out DIR` takes the snapshot's meshes and exits.
+    let out_dir = tempfile::tempdir().expect("a temporary folder");
+    let subscribe = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["subscribe", "--count", "4", "--socket"])
+        .arg(&daemon.socket)
+        .arg("--out")
+        .arg(out_dir.path())
+        .output()
+        .expect("tacmesh subscribe runs");
+    let stdout = String::from_utf8_lossy(&subscribe.stdout);
+    assert!(subscribe.status.success(), "{stdout}");
+    assert_eq!(stdout.matches("upsert object").count(), 4, "{stdout}");
+    let written: Vec<_> = std::fs::read_dir(out_dir.path()).unwrap().collect();
+    assert_eq!(written.len(), 4, "{stdout}");
+    for entry in written {
+        let mesh = tacmesh::formats::read_mesh(&entry.unwrap().path()).expect("a readable PLY");
+        assert!(!mesh.triangles.is_empty());
+    }
+
     let (status, _took) = daemon.terminate();
     assert!(status.success(), "{status}");
 }
