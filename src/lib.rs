@@ -18,6 +18,7 @@ pub mod subscriber;
 pub use tacmesh_formats as formats;
 pub use tacmesh_protocol as protocol;
 pub use tacmesh_reconstruct as reconstruct;
+pub use tacmesh_segment as segment;
 pub use tacmesh_sim as sim;
 pub use tacmesh_simplify as simplify;
 pub use tacmesh_source as source;

@@ -67,6 +67,20 @@ const MESH_WRITE_EXTENSIONS: &str = ".ply or .obj";
 /// non-finite coordinate (an organised PCD's invalid pixels, for one). Normals are kept when
 /// the file has them: PLY `nx ny nz`, PCD `normal_x normal_y normal_z`, XYZ's 6-column form.
 pub fn read_cloud(path: &Path) -> Result<PointCloud, FormatError> {
+    let mut cloud = read_cloud_in_file_order(path)?;
+    let dropped = cloud.retain_finite();
+    if dropped > 0 {
+        tracing::debug!(
+            "{}: dropped {dropped} points with non-finite coordinates",
+            path.display()
+        );
+    }
+    Ok(cloud)
+}
+
+/// As [`read_cloud`], but every point of the file in its order, non-finite ones included, so
+/// that per-point results (labels) line up with the file.
+pub fn read_cloud_in_file_order(path: &Path) -> Result<PointCloud, FormatError> {
     let name = path.display().to_string();
     let parse: fn(&[u8], &str) -> Result<PointCloud, FormatError> = match extension(path).as_str() {
         "ply" => ply::parse_cloud,
@@ -80,12 +94,7 @@ pub fn read_cloud(path: &Path) -> Result<PointCloud, FormatError> {
             })
         }
     };
-    let mut cloud = parse(&read_bytes(path)?, &name)?;
-    let dropped = cloud.retain_finite();
-    if dropped > 0 {
-        tracing::debug!("{name}: dropped {dropped} points with non-finite coordinates");
-    }
-    Ok(cloud)
+    parse(&read_bytes(path)?, &name)
 }
 
 /// Reads a triangle mesh, choosing the format by extension. Vertices keep the file's order.
