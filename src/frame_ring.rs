@@ -40,6 +40,8 @@ struct State<T> {
 pub struct FrameRing<T> {
     state: Mutex<State<T>>,
     ready: Condvar,
+    /// Signalled when an item leaves, for [`FrameRing::push_wait`].
+    space: Condvar,
     capacity: usize,
 }
 
@@ -55,6 +57,7 @@ impl<T> FrameRing<T> {
                 closed: false,
             }),
             ready: Condvar::new(),
+            space: Condvar::new(),
             capacity,
         }
     }
@@ -87,6 +90,31 @@ impl<T> FrameRing<T> {
         dropped
     }
 
+    /// Queues `item` without dropping anything: waits while the ring is full (a recording read
+    /// as fast as possible must not lose frames to its own speed). Gives the item back if the
+    /// ring is closed meanwhile or `give_up` turns true (checked every 50 ms).
+    pub fn push_wait(&self, item: T, give_up: impl Fn() -> bool) -> Option<T> {
+        let mut state = self.lock();
+        loop {
+            if state.closed || give_up() {
+                return Some(item);
+            }
+            if state.items.len() < self.capacity {
+                break;
+            }
+            state = self
+                .space
+                .wait_timeout(state, Duration::from_millis(50))
+                .unwrap_or_else(|poisoned| poisoned.into_inner())
+                .0;
+        }
+        state.pushed += 1;
+        state.items.push_back(item);
+        drop(state);
+        self.ready.notify_one();
+        None
+    }
+
     /// The oldest queued item, waiting up to `timeout` for one.
     pub fn pop_timeout(&self, timeout: Duration) -> Pop<T> {
         let state = self.lock();
@@ -95,7 +123,10 @@ impl<T> FrameRing<T> {
             .wait_timeout_while(state, timeout, |s| s.items.is_empty() && !s.closed)
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         match state.items.pop_front() {
-            Some(item) => Pop::Item(item),
+            Some(item) => {
+                self.space.notify_one();
+                Pop::Item(item)
+            }
             None if state.closed => Pop::Closed,
             None => Pop::TimedOut,
         }
@@ -106,6 +137,7 @@ impl<T> FrameRing<T> {
     pub fn close(&self) {
         self.lock().closed = true;
         self.ready.notify_all();
+        self.space.notify_all();
     }
 
     pub fn stats(&self) -> RingStats {
@@ -122,6 +154,26 @@ impl<T> FrameRing<T> {
 mod tests {
     use super::*;
     use std::sync::Arc;
+
+    #[test]
+    fn push_wait_waits_for_room_instead_of_dropping() {
+        let ring = Arc::new(FrameRing::new(1));
+        assert_eq!(ring.push_wait(1, || false), None);
+        let producer = {
+            let ring = Arc::clone(&ring);
+            std::thread::spawn(move || ring.push_wait(2, || false))
+        };
+        // The producer waits until the consumer takes item 1; nothing is dropped.
+        assert_eq!(ring.pop_timeout(Duration::from_secs(5)), Pop::Item(1));
+        assert_eq!(producer.join().unwrap(), None);
+        assert_eq!(ring.pop_timeout(Duration::from_secs(5)), Pop::Item(2));
+        assert_eq!(ring.stats().dropped, 0);
+        // A full ring and a give-up condition: the item comes back.
+        ring.push(3);
+        assert_eq!(ring.push_wait(4, || true), Some(4));
+        ring.close();
+        assert_eq!(ring.push_wait(5, || false), Some(5));
+    }
 
     #[test]
     fn full_ring_drops_oldest_and_counts_it() {

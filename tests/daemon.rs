@@ -19,7 +19,7 @@ use tacmesh::TriMesh;
 /// Support planes have ids from here up (see `tacmesh::daemon::planes`).
 const FIRST_PLANE_ID: u64 = 1 << 32;
 
-static ONE_DAEMON_AT_A_TIME: Mutex<()> = Mutex::new(());
+pub static ONE_DAEMON_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// A `tacmesh run` child process on a scene written to a temporary folder.
 struct Daemon {

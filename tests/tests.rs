@@ -6,3 +6,4 @@ mod cli_errors;
 mod daemon;
 mod offline_pipeline;
 mod real_scans;
+mod replay;

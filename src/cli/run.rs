@@ -16,9 +16,15 @@ pub struct RunArgs {
     /// Config file (TOML; see tacmesh.example.toml). Options given here override it.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// The sensor: `sim` (the demo scene), `sim:SCENE.toml` (a scene file, see scenes/)
+    /// A sensor, repeatable (all feed one object map): `sim` (the demo scene),
+    /// `sim:SCENE.toml` (a scene file, see scenes/), `replay:FILE.oni` (OpenNI recording),
+    /// `replay:FILE.bag` (RealSense ROS bag), `serial:camsense:PORT`,
+    /// `serial:rplidar:PORT[@BAUD]`. Replaces the config file's [[sensor]] list
     #[arg(long)]
-    sensor: Option<String>,
+    sensor: Vec<String>,
+    /// Recordings: start again at the end instead of stopping
+    #[arg(long = "loop")]
+    looping: bool,
     /// Socket path [default: $XDG_RUNTIME_DIR/tacmesh.sock]
     #[arg(long)]
     socket: Option<PathBuf>,
@@ -36,14 +42,26 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         Some(path) => DaemonConfig::load(path)?,
         None => DaemonConfig::default(),
     };
-    if let Some(sensor) = args.sensor {
-        config.sensor.spec = sensor;
+    if !args.sensor.is_empty() {
+        config.sensor = args
+            .sensor
+            .iter()
+            .map(|spec| tacmesh::daemon::config::SensorSection {
+                spec: spec.clone(),
+                ..Default::default()
+            })
+            .collect();
     }
     if let Some(socket) = args.socket {
         config.socket.path = Some(socket);
     }
-    if args.unpaced {
-        config.sensor.paced = Some(false);
+    for sensor in &mut config.sensor {
+        if args.unpaced {
+            sensor.paced = Some(false);
+        }
+        if args.looping {
+            sensor.looping = true;
+        }
     }
 
     let stop = StopSignal::new();

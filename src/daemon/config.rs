@@ -8,10 +8,11 @@ use std::time::Duration;
 use serde::Deserialize;
 
 /// Everything `tacmesh run` can be told. Command-line options override the file.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DaemonConfig {
-    pub sensor: SensorSection,
+    /// The sensors, each a `[[sensor]]` table; all feed one object map. Default: one `sim`.
+    pub sensor: Vec<SensorSection>,
     pub socket: SocketSection,
     pub pipeline: PipelineSection,
     pub track: TrackSection,
@@ -19,15 +20,36 @@ pub struct DaemonConfig {
     pub stats: StatsSection,
 }
 
-/// Which depth source to read.
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        Self {
+            sensor: vec![SensorSection::default()],
+            socket: SocketSection::default(),
+            pipeline: PipelineSection::default(),
+            track: TrackSection::default(),
+            mesh: MeshSection::default(),
+            stats: StatsSection::default(),
+        }
+    }
+}
+
+/// One depth source to read.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SensorSection {
-    /// `sim` (the built-in demo scene), `sim:demo`, or `sim:PATH` to a scene TOML file.
+    /// Which backend and device, by prefix (see `tacmesh run --help`): `sim`, `sim:SCENE.toml`,
+    /// `replay:PATH` (.oni, .bag, a folder or list of depth images or clouds),
+    /// `serial:camsense:PORT`, `serial:rplidar:PORT`. Default `sim`.
     pub spec: String,
-    /// Override the scene's pacing: `true` renders at the scene's frame rate of wall-clock
-    /// time, `false` as fast as the pipeline takes frames. Default: the scene file's choice.
+    /// Pacing: `true` delivers frames at the sensor's (or recording's) rate of wall-clock time,
+    /// `false` as fast as the pipeline takes them. Default: the source's own choice (real time).
     pub paced: Option<bool>,
+    /// Recordings only: start again at the end instead of stopping. Default false.
+    #[serde(rename = "loop")]
+    pub looping: bool,
+    /// Where the sensor (rig) is in the world, applied on top of the pose the source reports
+    /// (identity for hardware and recordings; the scene's camera pose for `sim`). Default: none.
+    pub pose: Option<PoseSection>,
 }
 
 impl Default for SensorSection {
@@ -35,7 +57,28 @@ impl Default for SensorSection {
         Self {
             spec: "sim".into(),
             paced: None,
+            looping: false,
+            pose: None,
         }
+    }
+}
+
+/// A rigid pose: rotate by `rotation_deg` (roll about x, then pitch about y, then yaw about z,
+/// in the world frame), then translate by `translation_m`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PoseSection {
+    pub translation_m: [f32; 3],
+    pub rotation_deg: [f32; 3],
+}
+
+impl PoseSection {
+    pub fn world_from_sensor(&self) -> glam::Affine3A {
+        let [roll, pitch, yaw] = self.rotation_deg.map(f32::to_radians);
+        glam::Affine3A::from_rotation_translation(
+            glam::Quat::from_euler(glam::EulerRot::ZYX, yaw, pitch, roll),
+            glam::Vec3::from(self.translation_m),
+        )
     }
 }
 
@@ -193,6 +236,28 @@ impl DaemonConfig {
                 })
             }
         }
+        if self.sensor.is_empty() {
+            return Err(ConfigError::OutOfRange {
+                key: "sensor",
+                value: "[]".into(),
+                expected: "at least one [[sensor]]",
+            });
+        }
+        for sensor in &self.sensor {
+            let finite = sensor.pose.as_ref().is_none_or(|pose| {
+                pose.translation_m
+                    .iter()
+                    .chain(&pose.rotation_deg)
+                    .all(|v| v.is_finite())
+            });
+            if !finite {
+                return Err(ConfigError::OutOfRange {
+                    key: "sensor.pose",
+                    value: format!("{:?}", sensor.pose),
+                    expected: "finite numbers",
+                });
+            }
+        }
         positive("pipeline.max_range_m", self.pipeline.max_range_m)?;
         positive("track.voxel_size_m", self.track.voxel_size_m)?;
         positive("track.leave_after_s", self.track.leave_after_s)?;
@@ -310,6 +375,23 @@ mod tests {
         assert!(err.to_string().contains("socket.mode"), "{err}");
         let err = parse("[pipeline]\nring_capacity = 0\n").unwrap_err();
         assert!(err.to_string().contains("ring_capacity"), "{err}");
+    }
+
+    #[test]
+    fn several_sensors_with_poses() {
+        let config = parse(
+            "[[sensor]]\nspec = \"sim\"\n[[sensor]]\nspec = \"replay:a.oni\"\nloop = true\n\
+             pose = { translation_m = [1, 0, 0.5], rotation_deg = [0, 0, 90] }\n",
+        )
+        .unwrap();
+        assert_eq!(config.sensor.len(), 2);
+        assert!(config.sensor[1].looping);
+        let pose = config.sensor[1].pose.as_ref().unwrap().world_from_sensor();
+        // Yaw 90°: x goes to y, then the translation.
+        let p = pose.transform_point3(glam::Vec3::X);
+        assert!(p.abs_diff_eq(glam::Vec3::new(1.0, 1.0, 0.5), 1e-6), "{p}");
+        let err = parse("[[sensor]]\nspec = \"sim\"\nposition = [1, 2, 3]\n").unwrap_err();
+        assert!(err.to_string().contains("position"), "{err}");
     }
 
     #[test]

@@ -58,6 +58,7 @@ pub struct Counters {
     pub invalid_pixels: AtomicU64,
     pub frames_processed: AtomicU64,
     pub source_errors: AtomicU64,
+    pub source_restarts: AtomicU64,
     pub malformed_frames: AtomicU64,
     pub objects_tracked: AtomicU64,
     pub meshing_runs: AtomicU64,
@@ -72,6 +73,7 @@ impl Default for Counters {
             invalid_pixels: AtomicU64::new(0),
             frames_processed: AtomicU64::new(0),
             source_errors: AtomicU64::new(0),
+            source_restarts: AtomicU64::new(0),
             malformed_frames: AtomicU64::new(0),
             objects_tracked: AtomicU64::new(0),
             meshing_runs: AtomicU64::new(0),
@@ -96,6 +98,7 @@ pub struct CounterSnapshot {
     pub frames_processed: u64,
     pub invalid_pixels: u64,
     pub source_errors: u64,
+    pub source_restarts: u64,
     pub malformed_frames: u64,
     pub objects_tracked: u64,
     pub meshing_runs: u64,
@@ -142,6 +145,7 @@ impl Counters {
             frames_processed: load(&self.frames_processed),
             invalid_pixels: load(&self.invalid_pixels),
             source_errors: load(&self.source_errors),
+            source_restarts: load(&self.source_restarts),
             malformed_frames: load(&self.malformed_frames),
             objects_tracked: load(&self.objects_tracked),
             meshing_runs: load(&self.meshing_runs),
@@ -187,7 +191,7 @@ impl CounterSnapshot {
             .map(|(name, p50, p99)| format!("{name} {p50:.1}/{p99:.1}"))
             .collect();
         format!(
-            "frames in {} processed {} dropped {}, invalid pixels {}, source errors {}, malformed frames {}, \
+            "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
              objects {}, meshing runs {} (failed {}), pose updates {}, meshes published {}, \
              bytes sent {}, subscribers {} (dropped {}); frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
@@ -196,6 +200,7 @@ impl CounterSnapshot {
             self.ring.dropped,
             self.invalid_pixels,
             self.source_errors,
+            self.source_restarts,
             self.malformed_frames,
             self.objects_tracked,
             self.meshing_runs,

@@ -45,8 +45,9 @@ use perception::Perception;
 pub enum DaemonError {
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// Boxed: backend errors carry paths and sources, and this is the cold path.
     #[error(transparent)]
-    Sensor(#[from] SensorError),
+    Sensor(#[from] Box<SensorError>),
     #[error(transparent)]
     Publish(#[from] PublishError),
     #[error("config [track]: {0}")]
@@ -112,7 +113,7 @@ pub(crate) struct Shared {
 /// A running daemon.
 pub struct Daemon {
     shared: Arc<Shared>,
-    source: Option<JoinHandle<()>>,
+    sources: Vec<JoinHandle<()>>,
     perception: Option<JoinHandle<()>>,
     meshers: Vec<JoinHandle<()>>,
     started: Instant,
@@ -125,14 +126,21 @@ impl Daemon {
     pub fn start(config: DaemonConfig) -> Result<Daemon, DaemonError> {
         config.validate()?;
         let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))?;
-        let spec = SensorSpec::parse(&config.sensor.spec)?;
-        let source = spec.open(config.sensor.paced)?;
+        // Every sensor opens before anything starts: a missing device fails the start.
+        let mut sensors = Vec::with_capacity(config.sensor.len());
+        for section in &config.sensor {
+            let spec = SensorSpec::parse(&section.spec).map_err(Box::new)?;
+            let source = spec.open(section).map_err(Box::new)?;
+            sensors.push((spec, section.clone(), source));
+        }
         let mut publisher_config = PublisherConfig::new(config.socket_path());
         publisher_config.mode = config.socket_mode()?;
         let publisher = Publisher::bind(publisher_config)?;
+        for (_, _, source) in &sensors {
+            tracing::info!("reading {}", source.name());
+        }
         tracing::info!(
-            "reading {} ; subscribe with: tacmesh subscribe --socket {}",
-            source.name(),
+            "subscribe with: tacmesh subscribe --socket {}",
             publisher.socket_path().display()
         );
         let shared = Arc::new(Shared {
@@ -146,7 +154,7 @@ impl Daemon {
         });
         let mut daemon = Daemon {
             shared: Arc::clone(&shared),
-            source: None,
+            sources: Vec::new(),
             perception: None,
             meshers: Vec::new(),
             started: Instant::now(),
@@ -168,8 +176,13 @@ impl Daemon {
             "perception",
             Box::new(move || Perception::new(objects).run(&s)),
         )?);
-        let s = Arc::clone(&shared);
-        daemon.source = Some(spawn("source", Box::new(move || read_source(&s, source)))?);
+        for (spec, section, source) in sensors {
+            let s = Arc::clone(&shared);
+            daemon.sources.push(spawn(
+                "source",
+                Box::new(move || read_source(&s, &spec, &section, source)),
+            )?);
+        }
         Ok(daemon)
     }
 
@@ -190,6 +203,7 @@ impl Daemon {
         let stats_every = Duration::from_secs_f32(self.shared.config.stats.publish_interval_s);
         let log_every = Duration::from_secs_f32(self.shared.config.stats.log_interval_s);
         let mut next_log = Instant::now() + log_every;
+        let mut said_ended = false;
         while !stop.wait_timeout(stats_every) {
             let snapshot = self.counters();
             if let Err(err) = self.shared.publisher.stats(snapshot.to_stats()) {
@@ -199,12 +213,16 @@ impl Daemon {
                 tracing::info!("{}", snapshot.log_line());
                 next_log += log_every;
             }
-            if self.source.as_ref().is_some_and(|s| s.is_finished())
+            // Recordings end; the daemon keeps serving their last meshes until it is stopped.
+            if !said_ended
+                && self.sources.iter().all(|s| s.is_finished())
                 && self.shared.ring.stats().queued == 0
                 && self.shared.mesh_queue.is_empty()
             {
-                tracing::info!("the sensor has no more frames; stopping");
-                break;
+                tracing::info!(
+                    "the sensors have no more frames; serving the last meshes until stopped"
+                );
+                said_ended = true;
             }
         }
         self.shutdown()
@@ -226,15 +244,15 @@ impl Daemon {
         }
         // A source blocked in a device read may not return soon; it holds only its own
         // handle and a reference to the shared state, so it is left to end with the process.
-        if let Some(source) = self.source.take() {
-            let deadline = Instant::now() + Duration::from_millis(500);
+        let deadline = Instant::now() + Duration::from_millis(500);
+        for source in self.sources.drain(..) {
             while !source.is_finished() && Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(5));
             }
             if source.is_finished() {
                 join(source, "source");
             } else {
-                tracing::warn!("the sensor did not stop within 0.5 s; leaving it behind");
+                tracing::warn!("a sensor did not stop within 0.5 s; leaving it behind");
             }
         }
         let snapshot = self.counters();
@@ -257,31 +275,99 @@ fn join(handle: JoinHandle<()>, name: &str) {
     }
 }
 
-/// The source thread: reads observations into the ring until stopped. Errors are counted and
-/// logged once per burst; the source is retried with backoff; a source at its end stops.
-fn read_source(shared: &Shared, mut source: Box<dyn DepthSource>) {
-    let mut backoff = Duration::from_millis(100);
+/// A source thread: reads observations into the ring until stopped, placing each with the
+/// sensor's configured pose. It supervises its source: malformed frames are counted and skipped;
+/// a device that disconnects or goes missing is reopened with backoff (100 ms doubling to 5 s),
+/// counted as a restart, while the rest of the daemon keeps serving the last meshes; a
+/// recording at its end stops the thread. Errors are logged once per burst.
+fn read_source(
+    shared: &Shared,
+    spec: &SensorSpec,
+    section: &config::SensorSection,
+    mut source: Box<dyn DepthSource>,
+) {
+    const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+    const MAX_BACKOFF: Duration = Duration::from_secs(5);
+    let rig = section
+        .pose
+        .as_ref()
+        .map(config::PoseSection::world_from_sensor);
+    let mut backoff = FIRST_BACKOFF;
     let mut in_burst = false;
-    while !shared.source_stop.load(Ordering::Relaxed) {
+    let stopped = || shared.source_stop.load(Ordering::Relaxed);
+    // Sleeps up to `pause`, waking early on stop; true when stopped.
+    let pause = |pause: Duration| {
+        let until = Instant::now() + pause;
+        while Instant::now() < until {
+            if stopped() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(20).min(pause));
+        }
+        stopped()
+    };
+    while !stopped() {
         match source.next_observation() {
-            Ok(observation) => {
+            Ok(mut observation) => {
+                if in_burst {
+                    tracing::info!("{}: delivering again", source.name());
+                }
                 in_burst = false;
-                backoff = Duration::from_millis(100);
-                shared.ring.push(observation);
+                backoff = FIRST_BACKOFF;
+                if let Some(rig) = rig {
+                    place(&mut observation, rig);
+                }
+                if spec.is_recording() {
+                    shared.ring.push_wait(observation, stopped);
+                } else {
+                    shared.ring.push(observation);
+                }
             }
             Err(SourceError::EndOfStream { device }) => {
                 tracing::info!("{device} has no more frames");
                 break;
             }
-            Err(err) => {
+            Err(err @ SourceError::Malformed { .. }) => {
                 Counters::add(&shared.counters.source_errors, 1);
                 if !in_burst {
-                    tracing::warn!("{}: {err}; retrying (logged once per burst)", source.name());
+                    tracing::warn!("{}: {err}; skipped (logged once per burst)", source.name());
                 }
                 in_burst = true;
-                std::thread::sleep(backoff);
-                backoff = (backoff * 2).min(Duration::from_secs(2));
+            }
+            Err(err) => {
+                Counters::add(&shared.counters.source_errors, 1);
+                tracing::warn!("{}: {err}; reopening in {backoff:?}", source.name());
+                in_burst = true;
+                loop {
+                    if pause(backoff) {
+                        return;
+                    }
+                    backoff = (backoff * 2).min(MAX_BACKOFF);
+                    Counters::add(&shared.counters.source_restarts, 1);
+                    match spec.open(section) {
+                        Ok(reopened) => {
+                            tracing::info!("{}: reopened", reopened.name());
+                            source = reopened;
+                            break;
+                        }
+                        Err(err) => {
+                            tracing::warn!("{}: {err}; retrying in {backoff:?}", section.spec)
+                        }
+                    }
+                }
             }
         }
+    }
+}
+
+/// Puts an observation from a sensor mounted at `world_from_rig` into the world frame.
+fn place(observation: &mut tacmesh_source::Observation, world_from_rig: glam::Affine3A) {
+    match observation {
+        tacmesh_source::Observation::Depth(frame) => {
+            frame.world_from_sensor = world_from_rig * frame.world_from_sensor;
+        }
+        tacmesh_source::Observation::Cloud {
+            world_from_sensor, ..
+        } => *world_from_sensor = world_from_rig * *world_from_sensor,
     }
 }

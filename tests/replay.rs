@@ -1,0 +1,100 @@
+//! Real recordings through the live daemon: each plays through `tacmesh run --sensor
+//! replay:…` into published object meshes (looped, so that objects are seen in enough frames
+//! to be confirmed; the bag holds only two depth frames).
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use tacmesh::protocol::Message;
+use tacmesh::subscriber::Subscription;
+
+use crate::daemon::ONE_DAEMON_AT_A_TIME;
+use crate::util::shared_data;
+
+/// Runs the daemon on `spec` until a subscriber has an object mesh; returns its face count.
+fn first_object_mesh(spec: &str) -> usize {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let socket = dir.path().join("replay.sock");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["run", "--loop", "--sensor", spec, "--socket"])
+        .arg(&socket)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("tacmesh runs");
+    let started = Instant::now();
+    while !socket.exists() {
+        if let Some(status) = child.try_wait().expect("waits") {
+            panic!("tacmesh run --sensor {spec} exited: {status}");
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "no socket for {spec}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut subscription =
+        Subscription::connect(&socket, Some(Duration::from_secs(30))).expect("subscribes");
+    let faces = loop {
+        match subscription.next_message() {
+            Ok(Message::Upsert(u)) if u.object_id < 1 << 32 && !u.mesh.triangles.is_empty() => {
+                break u.mesh.triangles.len();
+            }
+            Ok(_) => {}
+            Err(err) => panic!("{spec}: no object mesh: {err}"),
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(90),
+            "{spec}: no object mesh"
+        );
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    faces
+}
+
+fn path(relative: &str) -> String {
+    let p = shared_data(relative);
+    assert!(Path::new(&p).exists(), "{}", p.display());
+    p.display().to_string()
+}
+
+#[test]
+fn oni_recording_plays_into_meshes() {
+    let spec = format!(
+        "replay:{}",
+        path("recordings/openni1_primesense_12frames_640x480.oni")
+    );
+    assert!(first_object_mesh(&spec) > 0);
+}
+
+#[test]
+fn realsense_bag_plays_into_meshes() {
+    let spec = format!(
+        "replay:{}",
+        path("recordings/realsense_d435_single_depth_color_640x480.bag")
+    );
+    assert!(first_object_mesh(&spec) > 0);
+}
+
+#[test]
+fn tum_depth_pngs_play_into_meshes() {
+    let spec = format!(
+        "replay:{}?fx=520.9&fy=521.0&cx=325.1&cy=249.7&depth_scale_m=0.0002",
+        path("depth/tum_fr1")
+    );
+    assert!(first_object_mesh(&spec) > 0);
+}
+
+#[test]
+fn slambook_pgms_play_into_meshes() {
+    let spec = format!(
+        "replay:{}?fx=518&fy=519&cx=325.5&cy=253.5&depth_scale_m=0.001",
+        path("depth/slambook_kinect")
+    );
+    assert!(first_object_mesh(&spec) > 0);
+}
