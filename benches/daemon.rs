@@ -1,4 +1,6 @@
 //! The live daemon under its default load: `cargo bench --bench daemon [-- SECONDS [SPEC]]`.
+//! A `replay:` SPEC is played looped at maximum rate (`--unpaced --loop`), the recordings'
+//! throughput benchmark.
 //!
 //! Starts the real `tacmesh run` (this profile's build) on the default demo scene (640×480 at
 //! 30 fps, paced) for 60 s, subscribes over its socket, and reports: sustained frame rate,
@@ -22,9 +24,15 @@ fn main() {
     let dir = tempfile::tempdir().expect("a temporary directory");
     let socket: PathBuf = dir.path().join("bench.sock");
 
+    let replay = sensor.starts_with("replay:");
     let mut daemon = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
         .args(["run", "--sensor", &sensor, "--socket"])
         .arg(&socket)
+        .args(if replay {
+            &["--unpaced", "--loop"][..]
+        } else {
+            &[][..]
+        })
         .args(["--duration-s", &seconds.to_string()])
         .env("RUST_LOG", "info")
         .stderr(Stdio::inherit())

@@ -475,3 +475,70 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
     eprintln!("SIGTERM to exit: {took:?}");
     assert!(took < Duration::from_secs(5), "exit took {took:?}");
 }
+
+/// Two cameras on opposite sides of the same table feed one object map: each object keeps
+/// one id (not one per camera), the table is one plane, and the fused meshes cover both
+/// sides (their extent along the cameras' axis is the objects' full depth).
+#[test]
+fn two_cameras_feed_one_object_map() {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let front = dir.path().join("front.toml");
+    let back = dir.path().join("back.toml");
+    std::fs::write(&front, STATIC_SCENE.replace("fps = 30", "")).unwrap();
+    std::fs::write(
+        &back,
+        STATIC_SCENE.replace(
+            "eye = [0.0, -0.8485, 0.8485]",
+            "eye = [0.0, 0.8485, 0.8485]",
+        ),
+    )
+    .unwrap();
+    let socket = dir.path().join("two.sock");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .arg("run")
+        .arg("--sensor")
+        .arg(format!("sim:{}", front.display()))
+        .arg("--sensor")
+        .arg(format!("sim:{}", back.display()))
+        .arg("--socket")
+        .arg(&socket)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("tacmesh runs");
+    let started = Instant::now();
+    while !socket.exists() {
+        assert!(started.elapsed() < Duration::from_secs(30), "no socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut subscription =
+        Subscription::connect(&socket, Some(Duration::from_secs(10))).expect("subscribes");
+    let mut got = Received::default();
+    Received::collect(
+        &mut subscription,
+        Instant::now() + Duration::from_secs(10),
+        &mut got,
+    );
+    let _ = child.kill();
+    let _ = child.wait();
+
+    let last = &got.stats.last().expect("stats").1;
+    assert_eq!(last.objects_tracked, 3, "{last:?}");
+    let latest = got.latest_meshes();
+    let planes = latest.keys().filter(|&&id| id >= FIRST_PLANE_ID).count();
+    assert_eq!(planes, 1, "{:?}", latest.keys());
+    for upsert in latest.values().filter(|u| u.object_id < FIRST_PLANE_ID) {
+        let (lo, hi) = upsert.mesh.bounds().expect("a mesh");
+        // Seen from both sides, a 0.2 m object's mesh spans (nearly) its full depth in y;
+        // one view of the sphere or torus gives about half of it.
+        assert!(
+            hi.y - lo.y > 0.17,
+            "object {}: y extent {} m",
+            upsert.object_id,
+            hi.y - lo.y
+        );
+    }
+}

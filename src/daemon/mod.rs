@@ -284,15 +284,38 @@ fn read_source(
     shared: &Shared,
     spec: &SensorSpec,
     section: &config::SensorSection,
-    mut source: Box<dyn DepthSource>,
+    source: Box<dyn DepthSource>,
 ) {
-    const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+    let supervised = Supervised {
+        label: section.spec.clone(),
+        recording: spec.is_recording(),
+        world_from_rig: section
+            .pose
+            .as_ref()
+            .map(config::PoseSection::world_from_sensor),
+        reopen: Box::new(|| spec.open(section)),
+        first_backoff: Duration::from_millis(100),
+    };
+    supervise(shared, &supervised, source);
+}
+
+/// How one sensor is supervised.
+struct Supervised<'a> {
+    /// The spec, for log lines.
+    label: String,
+    /// Recordings wait for room in the ring instead of dropping frames.
+    recording: bool,
+    world_from_rig: Option<glam::Affine3A>,
+    reopen: Box<dyn Fn() -> Result<Box<dyn DepthSource>, SensorError> + Send + 'a>,
+    /// The first wait before reopening; it doubles up to 5 s.
+    first_backoff: Duration,
+}
+
+fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn DepthSource>) {
     const MAX_BACKOFF: Duration = Duration::from_secs(5);
-    let rig = section
-        .pose
-        .as_ref()
-        .map(config::PoseSection::world_from_sensor);
-    let mut backoff = FIRST_BACKOFF;
+    let first_backoff = sensor.first_backoff;
+    let rig = sensor.world_from_rig;
+    let mut backoff = first_backoff;
     let mut in_burst = false;
     let stopped = || shared.source_stop.load(Ordering::Relaxed);
     // Sleeps up to `pause`, waking early on stop; true when stopped.
@@ -313,11 +336,11 @@ fn read_source(
                     tracing::info!("{}: delivering again", source.name());
                 }
                 in_burst = false;
-                backoff = FIRST_BACKOFF;
+                backoff = first_backoff;
                 if let Some(rig) = rig {
                     place(&mut observation, rig);
                 }
-                if spec.is_recording() {
+                if sensor.recording {
                     shared.ring.push_wait(observation, stopped);
                 } else {
                     shared.ring.push(observation);
@@ -344,14 +367,14 @@ fn read_source(
                     }
                     backoff = (backoff * 2).min(MAX_BACKOFF);
                     Counters::add(&shared.counters.source_restarts, 1);
-                    match spec.open(section) {
+                    match (sensor.reopen)() {
                         Ok(reopened) => {
                             tracing::info!("{}: reopened", reopened.name());
                             source = reopened;
                             break;
                         }
                         Err(err) => {
-                            tracing::warn!("{}: {err}; retrying in {backoff:?}", section.spec)
+                            tracing::warn!("{}: {err}; retrying in {backoff:?}", sensor.label)
                         }
                     }
                 }
@@ -369,5 +392,132 @@ fn place(observation: &mut tacmesh_source::Observation, world_from_rig: glam::Af
         tacmesh_source::Observation::Cloud {
             world_from_sensor, ..
         } => *world_from_sensor = world_from_rig * *world_from_sensor,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+    use std::sync::atomic::AtomicUsize;
+    use tacmesh_source::{Observation, PointCloud};
+
+    /// A source that plays a script, then says it has no more frames.
+    struct Scripted(VecDeque<Result<Observation, SourceError>>);
+
+    impl DepthSource for Scripted {
+        fn name(&self) -> &str {
+            "scripted"
+        }
+        fn next_observation(&mut self) -> Result<Observation, SourceError> {
+            self.0.pop_front().unwrap_or(Err(SourceError::EndOfStream {
+                device: "scripted".into(),
+            }))
+        }
+    }
+
+    fn cloud() -> Result<Observation, SourceError> {
+        Ok(Observation::Cloud {
+            cloud: PointCloud::new(vec![glam::Vec3::ZERO]),
+            world_from_sensor: glam::Affine3A::IDENTITY,
+            capture_time: Duration::ZERO,
+        })
+    }
+
+    fn shared(dir: &std::path::Path) -> Shared {
+        let config = DaemonConfig::default();
+        Shared {
+            ring: FrameRing::new(64),
+            counters: Counters::default(),
+            board: Mutex::new(Board::default()),
+            mesh_queue: MeshQueue::default(),
+            publisher: Publisher::bind(PublisherConfig::new(dir.join("t.sock"))).unwrap(),
+            source_stop: AtomicBool::new(false),
+            config,
+        }
+    }
+
+    /// Malformed frames are skipped; a disconnect reopens the source (after one failed
+    /// attempt, with backoff) and frames flow again; the mount pose is applied; the end of
+    /// the stream ends the thread.
+    #[test]
+    fn supervisor_skips_bad_frames_and_reopens_a_lost_device() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = shared(dir.path());
+        let attempts = AtomicUsize::new(0);
+        let rig = glam::Affine3A::from_translation(glam::Vec3::new(0.0, 0.0, 2.0));
+        let sensor = Supervised {
+            label: "scripted".into(),
+            recording: true,
+            world_from_rig: Some(rig),
+            reopen: Box::new(|| {
+                if attempts.fetch_add(1, Ordering::SeqCst) == 0 {
+                    Err(SensorError::Unknown {
+                        spec: "still unplugged".into(),
+                    })
+                } else {
+                    Ok(Box::new(Scripted(VecDeque::from([cloud(), cloud()]))))
+                }
+            }),
+            first_backoff: Duration::from_millis(1),
+        };
+        let first = Scripted(VecDeque::from([
+            cloud(),
+            Err(SourceError::Malformed {
+                device: "scripted".into(),
+                reason: "wrong size".into(),
+            }),
+            cloud(),
+            Err(SourceError::Disconnected {
+                device: "scripted".into(),
+                reason: "unplugged".into(),
+            }),
+        ]));
+        supervise(&shared, &sensor, Box::new(first));
+        assert_eq!(attempts.load(Ordering::SeqCst), 2);
+        let load = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
+        assert_eq!(load(&shared.counters.source_errors), 2);
+        assert_eq!(load(&shared.counters.source_restarts), 2);
+        assert_eq!(shared.ring.stats().pushed, 4);
+        assert_eq!(shared.ring.stats().dropped, 0);
+        match shared.ring.pop_timeout(Duration::ZERO) {
+            crate::frame_ring::Pop::Item(Observation::Cloud {
+                world_from_sensor, ..
+            }) => assert_eq!(world_from_sensor, rig),
+            _ => panic!("a placed cloud"),
+        }
+        shared.publisher.shutdown("test over");
+    }
+
+    /// A stop request ends the thread while it waits to reopen a device.
+    #[test]
+    fn supervisor_stops_while_waiting_to_reopen() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = shared(dir.path());
+        let sensor = Supervised {
+            label: "gone".into(),
+            recording: false,
+            world_from_rig: None,
+            reopen: Box::new(|| {
+                Err(SensorError::Unknown {
+                    spec: "gone".into(),
+                })
+            }),
+            first_backoff: Duration::from_millis(10),
+        };
+        let gone = Scripted(VecDeque::from([Err(SourceError::DeviceMissing {
+            device: "gone".into(),
+            hint: "unplugged".into(),
+        })]));
+        let stop = &shared.source_stop;
+        std::thread::scope(|scope| {
+            let shared = &shared;
+            let worker = scope.spawn(move || supervise(shared, &sensor, Box::new(gone)));
+            std::thread::sleep(Duration::from_millis(100));
+            stop.store(true, Ordering::Relaxed);
+            worker.join().unwrap();
+        });
+        assert!(shared.counters.source_restarts.load(Ordering::Relaxed) >= 1);
+        shared.publisher.shutdown("test over");
     }
 }

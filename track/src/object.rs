@@ -107,6 +107,8 @@ pub struct TrackedObject {
     pub points_fused: u64,
     pub meshing_runs: u64,
     pub last_meshed: Option<Duration>,
+    /// Box of the fused points, object frame (empty: min > max).
+    bounds_in_object: (Vec3, Vec3),
 }
 
 impl TrackedObject {
@@ -137,6 +139,7 @@ impl TrackedObject {
             points_fused: 0,
             meshing_runs: 0,
             last_meshed: None,
+            bounds_in_object: (Vec3::INFINITY, Vec3::NEG_INFINITY),
         };
         object.restart(Quat::IDENTITY, centroid_in_world, capture_time, config);
         object.fuse(
@@ -296,6 +299,7 @@ impl TrackedObject {
         self.change = ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points);
         self.velocity = BodyVelocity::default();
         self.points_fused = 0;
+        self.bounds_in_object = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         self.last_pose_change = capture_time;
         self.set_pose(Affine3A::from_rotation_translation(
             rotation,
@@ -303,7 +307,6 @@ impl TrackedObject {
         ));
     }
 
-    /// Adds the cluster to the fused state with the current pose.
     /// The fraction of `points_in_world` that land in or beside (3×3×3) a voxel of the fused
     /// model at the current pose: how much of a cluster is a piece of this object.
     pub fn coverage(&self, points_in_world: &[Vec3]) -> f32 {
@@ -322,10 +325,36 @@ impl TrackedObject {
         covered as f32 / points_in_world.len() as f32
     }
 
+    /// The box of the fused points in the world at the current pose, grown by `margin_m`;
+    /// `None` before any point.
+    pub fn world_bounds(&self, margin_m: f32) -> Option<(Vec3, Vec3)> {
+        let (lo, hi) = self.bounds_in_object;
+        if lo.cmpgt(hi).any() {
+            return None;
+        }
+        let mut world = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for corner in 0..8 {
+            let pick = |bit: u32, a: f32, b: f32| if corner & bit == 0 { a } else { b };
+            let c = Vec3::new(
+                pick(1, lo.x, hi.x),
+                pick(2, lo.y, hi.y),
+                pick(4, lo.z, hi.z),
+            );
+            let w = self.world_from_object.transform_point3(c);
+            world = (world.0.min(w), world.1.max(w));
+        }
+        Some((
+            world.0 - Vec3::splat(margin_m),
+            world.1 + Vec3::splat(margin_m),
+        ))
+    }
+
     /// Fuses a fragment of this object (a piece of it that segmentation split off, such as a
-    /// side face seen at a grazing angle) at the current pose. Pose, velocity and centroid are
-    /// left to the main cluster.
-    pub fn fuse_fragment(&mut self, points_in_world: &[Vec3]) {
+    /// side face seen at a grazing angle, or its far side seen by a second camera) at the
+    /// current pose, and counts the object as seen. Pose, velocity and centroid are left to
+    /// the main cluster.
+    pub fn fuse_fragment(&mut self, points_in_world: &[Vec3], capture_time: Duration) {
+        self.last_seen = self.last_seen.max(capture_time);
         for &p_in_world in points_in_world {
             let p_in_object = self.object_from_world.transform_point3(p_in_world);
             if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
@@ -333,10 +362,13 @@ impl TrackedObject {
                 self.change.note_point(&self.grid, cell, count);
                 self.coarse.add_point(p_in_object);
                 self.points_fused += 1;
+                self.bounds_in_object.0 = self.bounds_in_object.0.min(p_in_object);
+                self.bounds_in_object.1 = self.bounds_in_object.1.max(p_in_object);
             }
         }
     }
 
+    /// Adds the cluster to the fused state with the current pose.
     fn fuse(
         &mut self,
         points_in_world: &[Vec3],
@@ -352,6 +384,8 @@ impl TrackedObject {
                 self.change.note_point(&self.grid, cell, count);
                 self.coarse.add_point(p_in_object);
                 self.points_fused += 1;
+                self.bounds_in_object.0 = self.bounds_in_object.0.min(p_in_object);
+                self.bounds_in_object.1 = self.bounds_in_object.1.max(p_in_object);
                 points_added += 1;
             }
         }

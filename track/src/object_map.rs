@@ -14,9 +14,13 @@ use crate::config::{TrackConfig, TrackError};
 use crate::icp::IcpScratch;
 use crate::object::{Observed, TrackedObject};
 
-/// A cluster no track claimed joins the object whose fused surface holds at least this
-/// fraction of its points, instead of becoming a new object.
+/// A cluster no track claimed joins the object whose fused surface (or box) holds at least
+/// this fraction of its points, instead of becoming a new object.
 const FRAGMENT_COVERAGE: f32 = 0.5;
+
+/// An object's box, for the fragment test, grown by this much (metres): a far side seen by
+/// another camera sticks out of the near side's box by the depth the near side could not see.
+const FRAGMENT_BOX_MARGIN_M: f32 = 0.03;
 
 /// One frame's segmentation: world points per object seen.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -194,21 +198,34 @@ impl ObjectMap {
                 continue;
             }
             // Segmentation sometimes splits a piece off an object (a side face seen at a
-            // grazing angle, sampled too sparsely to bridge the gap). A leftover cluster that
-            // mostly lies on an object's fused surface is that piece, not a new object.
+            // grazing angle, sampled too sparsely to bridge the gap), and a second camera sees
+            // an object's far side, whose centroid is far from the near side's. A leftover
+            // cluster that mostly lies on an object's fused surface, or mostly inside its box,
+            // is part of that object, not a new one.
             let host = self
                 .objects
                 .values()
-                .map(|o| (o.coverage(points), o.id))
-                .filter(|&(coverage, _)| coverage >= FRAGMENT_COVERAGE)
+                .map(|o| {
+                    let inside = o
+                        .world_bounds(FRAGMENT_BOX_MARGIN_M)
+                        .map_or(0.0, |(lo, hi)| {
+                            let n = points
+                                .iter()
+                                .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
+                                .count();
+                            n as f32 / points.len().max(1) as f32
+                        });
+                    (o.coverage(points).max(inside), o.id)
+                })
+                .filter(|&(share, _)| share >= FRAGMENT_COVERAGE)
                 .max_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some((coverage, id)) = host {
+            if let Some((share, id)) = host {
                 if let Some(object) = self.objects.get_mut(&id) {
-                    object.fuse_fragment(points);
+                    object.fuse_fragment(points, now);
                     debug!(
                         id,
                         points = points.len(),
-                        coverage,
+                        share,
                         "fragment fused into object"
                     );
                     report.cluster_ids[ci] = Some(id);
