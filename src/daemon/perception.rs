@@ -170,10 +170,12 @@ impl Perception {
             for &(id, pose) in &report.moved {
                 board.move_to(id, pose, capture_time, &shared.publisher, counters);
             }
-            counters.objects_tracked.store(
-                self.objects.len() as u64,
-                std::sync::atomic::Ordering::Relaxed,
-            );
+            // Confirmed objects only: a cluster seen in one or two frames (noise at long range,
+            // a passing hand) is tracked but is not yet an object anyone is told about.
+            let confirmed = self.objects.objects().filter(|o| o.confirmed).count();
+            counters
+                .objects_tracked
+                .store(confirmed as u64, std::sync::atomic::Ordering::Relaxed);
         }
         for job in self.objects.take_mesh_jobs(capture_time) {
             shared.mesh_queue.submit(job);
