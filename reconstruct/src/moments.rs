@@ -125,50 +125,77 @@ pub fn least_spread_direction(a: DMat3) -> DVec3 {
     best.normalize()
 }
 
-/// The eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix, by cyclic Jacobi
-/// rotations. Written here because glam has no eigen solver and a linear-algebra crate for one
-/// 3×3 case is not worth its weight; Jacobi is unconditionally stable for symmetric matrices
-/// and converges in a handful of sweeps.
+/// The eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix (see
+/// [`symmetric_eigen`]).
+pub fn smallest_eigenvector(m: DMat3) -> DVec3 {
+    let (values, vectors) = symmetric_eigen(&m.to_cols_array_2d());
+    let smallest = (0..3)
+        .min_by(|&i, &j| values[i].partial_cmp(&values[j]).unwrap_or(Ordering::Equal))
+        .unwrap_or(0);
+    DVec3::from_array(vectors[smallest]).normalize_or(DVec3::Z)
+}
+
+/// Eigenvalues and unit eigenvectors of a symmetric N×N matrix (`vectors[i]` belongs to
+/// `values[i]`; unsorted), by cyclic Jacobi rotations. Written here because glam has no eigen
+/// solver and a linear-algebra crate for the 3×3 plane fits and the tracker's 6×6 alignment
+/// normal matrix is not worth its weight; Jacobi is unconditionally stable for symmetric
+/// matrices and converges in a handful of sweeps.
 // Index loops mirror the textbook rotation formulas (Numerical Recipes §11.1).
 #[allow(clippy::needless_range_loop)]
-pub fn smallest_eigenvector(m: DMat3) -> DVec3 {
-    let mut a = m.to_cols_array_2d();
-    // Rows of `v` accumulate the rotations; at the end row i is the eigenvector of a[i][i].
-    let mut v = DMat3::IDENTITY.to_cols_array_2d();
-    for _sweep in 0..16 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        if off <= 1e-15 * (a[0][0].abs() + a[1][1].abs() + a[2][2].abs()) {
+pub fn symmetric_eigen<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
+    let mut a = *m;
+    // Columns of `v` accumulate the rotations: column i ends as the eigenvector of a[i][i].
+    let mut v = [[0.0f64; N]; N];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _sweep in 0..32 {
+        let (mut off, mut diag) = (0.0, 0.0);
+        for i in 0..N {
+            diag += a[i][i].abs();
+            for j in i + 1..N {
+                off += a[i][j].abs();
+            }
+        }
+        if off <= 1e-15 * diag || off == 0.0 {
             break;
         }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            if a[p][q] == 0.0 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            for k in 0..3 {
-                let (akp, akq) = (a[k][p], a[k][q]);
-                a[k][p] = c * akp - s * akq;
-                a[k][q] = s * akp + c * akq;
-            }
-            for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - s * aqk;
-                a[q][k] = s * apk + c * aqk;
-            }
-            for row in &mut v {
-                let (vp, vq) = (row[p], row[q]);
-                row[p] = c * vp - s * vq;
-                row[q] = s * vp + c * vq;
+        for p in 0..N {
+            for q in p + 1..N {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..N {
+                    let (akp, akq) = (a[k][p], a[k][q]);
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for k in 0..N {
+                    let (apk, aqk) = (a[p][k], a[q][k]);
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for row in &mut v {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
             }
         }
     }
-    let smallest = (0..3)
-        .min_by(|&i, &j| a[i][i].partial_cmp(&a[j][j]).unwrap_or(Ordering::Equal))
-        .unwrap_or(0);
-    DVec3::new(v[0][smallest], v[1][smallest], v[2][smallest]).normalize_or(DVec3::Z)
+    let mut values = [0.0f64; N];
+    let mut vectors = [[0.0f64; N]; N];
+    for i in 0..N {
+        values[i] = a[i][i];
+        for k in 0..N {
+            vectors[i][k] = v[k][i];
+        }
+    }
+    (values, vectors)
 }
 
 #[cfg(test)]

@@ -1,10 +1,10 @@
 //! The 6×6 linear algebra of one Gauss–Newton step: a symmetric positive definite solve
-//! (Cholesky, A = L·Lᵀ) and a symmetric eigen decomposition (cyclic Jacobi) that finds the
-//! directions the data do not constrain.
+//! (Cholesky, A = L·Lᵀ) and a symmetric eigen decomposition (the reconstruct crate's cyclic
+//! Jacobi, shared with its 3×3 plane fits) that finds the directions the data do not constrain.
 //!
 //! Written here rather than taken from nalgebra or faer: the alignment needs exactly one fixed
-//! 6×6 solve and decomposition per iteration, glam has no 6×6 type, and a hundred lines of
-//! textbook code (Golub & Van Loan §4.2 and §8.5) cost less than a linear-algebra dependency.
+//! 6×6 solve and decomposition per iteration, glam has no 6×6 type, and fifty lines of
+//! textbook code (Golub & Van Loan §4.2) cost less than a linear-algebra dependency.
 //! The normal equations carry a positive prior on the diagonal (see `icp`), so the matrix is
 //! positive definite and Cholesky, which needs no pivoting, is stable for it; Jacobi is
 //! unconditionally stable for symmetric matrices.
@@ -54,64 +54,9 @@ pub fn solve_spd6(a: &[[f64; 6]; 6], b: &[f64; 6]) -> Option<[f64; 6]> {
 }
 
 /// Eigenvalues and unit eigenvectors of a symmetric 6×6 matrix (`vectors[i]` belongs to
-/// `values[i]`), by cyclic Jacobi rotations; unsorted.
-// Index loops mirror the textbook rotation formulas.
-#[allow(clippy::needless_range_loop)]
+/// `values[i]`), unsorted: the reconstruct crate's Jacobi solver at N = 6.
 pub fn symmetric_eigen6(m: &[[f64; 6]; 6]) -> ([f64; 6], [[f64; 6]; 6]) {
-    let mut a = *m;
-    // Columns of `v` accumulate the rotations: column i ends as the eigenvector of a[i][i].
-    let mut v = [[0.0f64; 6]; 6];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for _sweep in 0..32 {
-        let mut off = 0.0;
-        let mut diag = 0.0;
-        for i in 0..6 {
-            diag += a[i][i].abs();
-            for j in i + 1..6 {
-                off += a[i][j].abs();
-            }
-        }
-        if off <= 1e-15 * diag || off == 0.0 {
-            break;
-        }
-        for p in 0..6 {
-            for q in p + 1..6 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..6 {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..6 {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for row in &mut v {
-                    let (vp, vq) = (row[p], row[q]);
-                    row[p] = c * vp - s * vq;
-                    row[q] = s * vp + c * vq;
-                }
-            }
-        }
-    }
-    let mut values = [0.0f64; 6];
-    let mut vectors = [[0.0f64; 6]; 6];
-    for i in 0..6 {
-        values[i] = a[i][i];
-        for k in 0..6 {
-            vectors[i][k] = v[k][i];
-        }
-    }
-    (values, vectors)
+    tacmesh_reconstruct::moments::symmetric_eigen(m)
 }
 
 #[cfg(test)]
