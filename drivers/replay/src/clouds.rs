@@ -10,7 +10,7 @@ use glam::Affine3A;
 use tacmesh_source::{monotonic_now, DepthSource, Observation, SourceError};
 
 use crate::listing::list_clouds;
-use crate::pacing::{Pacer, Pacing};
+use crate::pacing::{Pacer, Pacing, Playhead};
 use crate::ReplayError;
 
 /// How to replay a cloud sequence.
@@ -43,7 +43,7 @@ pub struct CloudSequence {
     name: String,
     files: Vec<PathBuf>,
     config: CloudSequenceConfig,
-    next: usize,
+    playhead: Playhead,
     pacer: Pacer,
 }
 
@@ -66,11 +66,12 @@ impl CloudSequence {
             reason,
         })?;
         let pacer = Pacer::new(config.pacing);
+        let playhead = Playhead::new(files.len(), config.looping);
         Ok(Self {
+            playhead,
             name,
             files,
             config,
-            next: 0,
             pacer,
         })
     }
@@ -96,17 +97,8 @@ impl DepthSource for CloudSequence {
     }
 
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
-        if self.next == self.files.len() {
-            if !self.config.looping {
-                return Err(SourceError::EndOfStream {
-                    device: self.name.clone(),
-                });
-            }
-            self.next = 0;
-            self.pacer.restart();
-        }
-        let path = &self.files[self.next];
-        self.next += 1;
+        let index = self.playhead.advance(&mut self.pacer, &self.name)?;
+        let path = &self.files[index];
         let cloud = tacmesh_formats::read_cloud(path).map_err(|e| SourceError::Malformed {
             device: self.name.clone(),
             reason: e.to_string(),

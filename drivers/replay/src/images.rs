@@ -12,7 +12,7 @@ use tacmesh_source::{
 
 use crate::decode::{read_depth_image, DepthImage, Z16Layout};
 use crate::listing::{list_depth_images, read_association_file, DepthFile};
-use crate::pacing::{Pacer, Pacing};
+use crate::pacing::{Pacer, Pacing, Playhead};
 use crate::ReplayError;
 
 /// How to turn an image sequence into depth frames.
@@ -59,7 +59,7 @@ pub struct ImageSequence {
     name: String,
     files: Vec<DepthFile>,
     config: ImageSequenceConfig,
-    next: usize,
+    playhead: Playhead,
     pacer: Pacer,
 }
 
@@ -100,11 +100,12 @@ impl ImageSequence {
             reason,
         })?;
         let pacer = Pacer::new(config.pacing);
+        let playhead = Playhead::new(files.len(), config.looping);
         Ok(Self {
+            playhead,
             name,
             files,
             config,
-            next: 0,
             pacer,
         })
     }
@@ -165,17 +166,7 @@ impl DepthSource for ImageSequence {
     }
 
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
-        if self.next == self.files.len() {
-            if !self.config.looping {
-                return Err(SourceError::EndOfStream {
-                    device: self.name.clone(),
-                });
-            }
-            self.next = 0;
-            self.pacer.restart();
-        }
-        let index = self.next;
-        self.next += 1;
+        let index = self.playhead.advance(&mut self.pacer, &self.name)?;
         let file = &self.files[index];
         let image = read_depth_image(&file.path, self.config.z16_layout)
             .map_err(|e| self.malformed(e.to_string()))?;

@@ -3,6 +3,8 @@
 
 use std::time::{Duration, Instant};
 
+use tacmesh_source::SourceError;
+
 /// The rate a replay delivers at.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Pacing {
@@ -101,5 +103,39 @@ mod tests {
         let again = Instant::now();
         pacer.wait(Some(100.0));
         assert!(again.elapsed() < Duration::from_millis(20));
+    }
+}
+
+/// Where a replay is in its list of files, and what happens at the end of it.
+#[derive(Debug, Clone)]
+pub(crate) struct Playhead {
+    next: usize,
+    len: usize,
+    looping: bool,
+}
+
+impl Playhead {
+    pub(crate) fn new(len: usize, looping: bool) -> Self {
+        Self {
+            next: 0,
+            len,
+            looping,
+        }
+    }
+
+    /// The index of the next file to play. At the end of the list: a new pass (restarting
+    /// `pacer`'s recorded clock) when looping, else [`SourceError::EndOfStream`] for `name`.
+    pub(crate) fn advance(&mut self, pacer: &mut Pacer, name: &str) -> Result<usize, SourceError> {
+        if self.next >= self.len {
+            if !self.looping || self.len == 0 {
+                return Err(SourceError::EndOfStream {
+                    device: name.to_owned(),
+                });
+            }
+            self.next = 0;
+            pacer.restart();
+        }
+        self.next += 1;
+        Ok(self.next - 1)
     }
 }
