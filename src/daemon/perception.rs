@@ -112,6 +112,13 @@ impl Perception {
             } else {
                 self.segment.min_cluster_points
             },
+            // The same for the largest: walls and furniture are background, not objects, at
+            // any stride (unscaled, a stride-2 wall passed as a 400,000-point "object").
+            max_cluster_points: if strided {
+                (self.segment.max_cluster_points / (stride * stride) as usize).max(20)
+            } else {
+                self.segment.max_cluster_points
+            },
             ..self.segment.clone()
         };
         let clusters = match organised {

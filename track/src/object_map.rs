@@ -202,20 +202,32 @@ impl ObjectMap {
             // an object's far side, whose centroid is far from the near side's. A leftover
             // cluster that mostly lies on an object's fused surface, or mostly inside its box,
             // is part of that object, not a new one.
+            // Objects whose (grown) box misses the cluster's box are skipped before any
+            // per-point work: a room scene has dozens of clusters and objects.
+            let (cluster_lo, cluster_hi) = points
+                .iter()
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+                    (lo.min(p), hi.max(p))
+                });
             let host = self
                 .objects
                 .values()
-                .map(|o| {
-                    let inside = o
-                        .world_bounds(FRAGMENT_BOX_MARGIN_M)
-                        .map_or(0.0, |(lo, hi)| {
-                            let n = points
-                                .iter()
-                                .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
-                                .count();
-                            n as f32 / points.len().max(1) as f32
-                        });
-                    (o.coverage(points).max(inside), o.id)
+                .filter_map(|o| {
+                    let (lo, hi) = o.world_bounds(FRAGMENT_BOX_MARGIN_M)?;
+                    if cluster_hi.cmplt(lo).any() || cluster_lo.cmpgt(hi).any() {
+                        return None;
+                    }
+                    let inside = points
+                        .iter()
+                        .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
+                        .count() as f32
+                        / points.len().max(1) as f32;
+                    let share = if inside >= FRAGMENT_COVERAGE {
+                        inside
+                    } else {
+                        o.coverage(points)
+                    };
+                    Some((share, o.id))
                 })
                 .filter(|&(share, _)| share >= FRAGMENT_COVERAGE)
                 .max_by(|a, b| a.0.total_cmp(&b.0));
