@@ -355,6 +355,13 @@ impl TrackedObject {
     /// the main cluster.
     pub fn fuse_fragment(&mut self, points_in_world: &[Vec3], capture_time: Duration) {
         self.last_seen = self.last_seen.max(capture_time);
+        self.add_points(points_in_world);
+    }
+
+    /// Adds world points to the fused grids at the current pose (with their change
+    /// accounting and the fused box); returns how many were finite and added.
+    fn add_points(&mut self, points_in_world: &[Vec3]) -> u64 {
+        let mut added = 0;
         for &p_in_world in points_in_world {
             let p_in_object = self.object_from_world.transform_point3(p_in_world);
             if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
@@ -364,8 +371,10 @@ impl TrackedObject {
                 self.points_fused += 1;
                 self.bounds_in_object.0 = self.bounds_in_object.0.min(p_in_object);
                 self.bounds_in_object.1 = self.bounds_in_object.1.max(p_in_object);
+                added += 1;
             }
         }
+        added
     }
 
     /// Adds the cluster to the fused state with the current pose.
@@ -376,19 +385,7 @@ impl TrackedObject {
         capture_time: Duration,
         viewpoint_in_world: Vec3,
     ) {
-        let mut points_added = 0;
-        for &p_in_world in points_in_world {
-            let p_in_object = self.object_from_world.transform_point3(p_in_world);
-            if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
-                let count = moments.count as u32;
-                self.change.note_point(&self.grid, cell, count);
-                self.coarse.add_point(p_in_object);
-                self.points_fused += 1;
-                self.bounds_in_object.0 = self.bounds_in_object.0.min(p_in_object);
-                self.bounds_in_object.1 = self.bounds_in_object.1.max(p_in_object);
-                points_added += 1;
-            }
-        }
+        let points_added = self.add_points(points_in_world);
         let centroid_in_object = self.object_from_world.transform_point3(centroid_in_world);
         self.centroid_in_object = if self.points_fused == points_added {
             centroid_in_object
