@@ -31,15 +31,27 @@ struct Daemon {
 
 impl Daemon {
     fn start(scene_toml: &str) -> Daemon {
+        Self::start_cameras(&[scene_toml])
+    }
+
+    /// One daemon with a simulated camera per scene file (all feed one object map);
+    /// `scene` is the first.
+    fn start_cameras(scene_tomls: &[&str]) -> Daemon {
         let dir = tempfile::tempdir().expect("a temporary folder");
-        let scene_path = dir.path().join("scene.toml");
-        std::fs::write(&scene_path, scene_toml).expect("scene written");
-        let scene = SceneFile::load(&scene_path).expect("the test scene parses");
+        let mut command = Command::new(env!("CARGO_BIN_EXE_tacmesh"));
+        command.arg("run");
+        let mut scenes = Vec::new();
+        for (k, toml) in scene_tomls.iter().enumerate() {
+            let scene_path = dir.path().join(format!("scene-{k}.toml"));
+            std::fs::write(&scene_path, toml).expect("scene written");
+            scenes.push(SceneFile::load(&scene_path).expect("the test scene parses"));
+            command
+                .arg("--sensor")
+                .arg(format!("sim:{}", scene_path.display()));
+        }
+        let scene = scenes.into_iter().next().expect("at least one scene");
         let socket = dir.path().join("tacmesh.sock");
-        let child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
-            .arg("run")
-            .arg("--sensor")
-            .arg(format!("sim:{}", scene_path.display()))
+        let child = command
             .arg("--socket")
             .arg(&socket)
             .env("RUST_LOG", "info")
@@ -508,46 +520,19 @@ fn two_cameras_feed_one_object_map() {
     let _one = ONE_DAEMON_AT_A_TIME
         .lock()
         .unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().expect("a temporary folder");
-    let front = dir.path().join("front.toml");
-    let back = dir.path().join("back.toml");
-    std::fs::write(&front, STATIC_SCENE.replace("fps = 30", "")).unwrap();
-    std::fs::write(
-        &back,
-        STATIC_SCENE.replace(
-            "eye = [0.0, -0.8485, 0.8485]",
-            "eye = [0.0, 0.8485, 0.8485]",
-        ),
-    )
-    .unwrap();
-    let socket = dir.path().join("two.sock");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
-        .arg("run")
-        .arg("--sensor")
-        .arg(format!("sim:{}", front.display()))
-        .arg("--sensor")
-        .arg(format!("sim:{}", back.display()))
-        .arg("--socket")
-        .arg(&socket)
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::null())
-        .spawn()
-        .expect("tacmesh runs");
-    let started = Instant::now();
-    while !socket.exists() {
-        assert!(started.elapsed() < Duration::from_secs(30), "no socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let mut subscription =
-        Subscription::connect(&socket, Some(Duration::from_secs(10))).expect("subscribes");
+    let back = STATIC_SCENE.replace(
+        "eye = [0.0, -0.8485, 0.8485]",
+        "eye = [0.0, 0.8485, 0.8485]",
+    );
+    let daemon = Daemon::start_cameras(&[STATIC_SCENE, &back]);
+    let mut subscription = daemon.subscribe();
     let mut got = Received::default();
     Received::collect(
         &mut subscription,
         Instant::now() + Duration::from_secs(10),
         &mut got,
     );
-    let _ = child.kill();
-    let _ = child.wait();
+    drop(daemon);
 
     let last = &got.stats.last().expect("stats").1;
     assert_eq!(last.objects_tracked, 3, "{last:?}");
