@@ -98,3 +98,34 @@ fn slambook_pgms_play_into_meshes() {
     );
     assert!(first_object_mesh(&spec) > 0);
 }
+
+/// Simulated depth recorded with DepthAI's own recorder (host-only, no camera) plays through
+/// `tacmesh run --sensor depthai:FILE.mcap` into meshes. Needs the `depthai` feature and the
+/// `depthai` Python package (CI names its venv with `TACMESH_DEPTHAI_VENV`).
+#[cfg(feature = "depthai")]
+#[test]
+fn depthai_recording_plays_into_meshes() {
+    use tacmesh_source::{DepthSource, Observation};
+
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let recording = dir.path().join("sim.mcap");
+    let mut camera = tacmesh_sim::SceneFile::demo().into_camera().expect("demo");
+    camera.set_paced(false);
+    let frames: Vec<_> = (0..30)
+        .map(|_| match camera.next_observation().expect("renders") {
+            Observation::Depth(frame) => frame,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    let venv = std::env::var("TACMESH_DEPTHAI_VENV").ok();
+    let written =
+        tacmesh_depthai::record_depth_frames(&recording, venv.as_deref().map(Path::new), &frames)
+            .expect("DepthAI records");
+    assert_eq!(written, 30);
+    let spec = format!(
+        "depthai:{}{}",
+        recording.display(),
+        venv.map_or(String::new(), |v| format!("?venv={v}"))
+    );
+    assert!(first_object_mesh(&spec) > 0);
+}

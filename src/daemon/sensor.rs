@@ -11,7 +11,8 @@
 //! | `serial:rplidar:PORT[@BAUD]` | an RPLIDAR A-series (115200 baud; A3: `@256000`) |
 //! | `v4l2:/dev/videoN?fx=…&fy=…&cx=…&cy=…[&width=640&height=480&fps=30&depth_scale_m=0.001]` | a V4L2 depth camera (Z16 or Y16), with the cargo feature `v4l2` |
 //! | `openni2:` (first device), `openni2:URI` (a device URI or an .oni file) | OpenNI2 through our own FFI, with the cargo feature `openni2` |
-//! | `depthai:…` | not in this build yet (a clear error) |
+//! | `depthai:[DEVICE][?width=…&height=…&fps=…&align=left\|right\|rgb&preset=…&record=FILE.mcap&venv=…]` | a Luxonis OAK camera's stereo depth through DepthAI's Python package, with the cargo feature `depthai` |
+//! | `depthai:FILE.mcap[?rate=max&venv=…]` | a DepthAI recording (same feature) |
 
 use std::path::{Path, PathBuf};
 
@@ -41,6 +42,8 @@ pub enum SensorSpec {
     Camsense(String),
     /// An RPLIDAR A-series on a serial port, at a baud rate.
     Rplidar { port: String, baud: u32 },
+    /// A Luxonis OAK camera, or a DepthAI `.mcap` recording.
+    DepthAi(Box<tacmesh_depthai::DepthAiOptions>),
 }
 
 /// `v4l2:DEVICE?key=value&…`: the device node, the intrinsics (fx, fy, cx, cy required; width
@@ -123,15 +126,11 @@ impl V4l2Spec {
 #[derive(Debug, thiserror::Error)]
 pub enum SensorError {
     #[error(
-        "unknown sensor spec {spec:?}: expected `sim`, `sim:SCENE.toml`, `replay:FILE.oni|.bag`, \
+        "unknown sensor spec {spec:?}: expected `sim`, `sim:SCENE.toml`, `replay:PATH`, \
+         `v4l2:/dev/videoN?…`, `openni2:[URI]`, `depthai:[DEVICE|FILE.mcap]`, \
          `serial:camsense:PORT` or `serial:rplidar:PORT[@BAUD]`"
     )]
     Unknown { spec: String },
-    #[error(
-        "sensor {spec:?}: the {backend} backend is not part of this build of tacmesh yet; \
-         use `sim`, `sim:SCENE.toml`, `replay:PATH` or `serial:…`"
-    )]
-    NotBuilt { spec: String, backend: &'static str },
     #[error(
         "sensor {spec:?}: this tacmesh was built without the {backend} backend; rebuild with \
          `cargo build --release --features {feature}`"
@@ -158,16 +157,21 @@ pub enum SensorError {
     Device(#[from] tacmesh_source::SourceError),
     #[error(transparent)]
     Sequence(#[from] tacmesh_replay::ReplayError),
+    #[error(transparent)]
+    DepthAi(#[from] tacmesh_depthai::DepthAiError),
 }
 
 impl SensorSpec {
     /// Whether the source is a recording: read without losing frames (the reader waits for
     /// the pipeline) rather than dropping the oldest like a live sensor.
     pub fn is_recording(&self) -> bool {
-        matches!(
-            self,
-            SensorSpec::Oni(_) | SensorSpec::Bag(_) | SensorSpec::Sequence(_)
-        )
+        match self {
+            SensorSpec::Oni(_) | SensorSpec::Bag(_) | SensorSpec::Sequence(_) => true,
+            SensorSpec::DepthAi(options) => {
+                matches!(options.mode, tacmesh_depthai::Mode::Replay(_))
+            }
+            _ => false,
+        }
     }
 
     pub fn parse(spec: &str) -> Result<SensorSpec, SensorError> {
@@ -209,10 +213,9 @@ impl SensorSpec {
             ("openni2", rest) => Ok(SensorSpec::OpenNi2(
                 rest.filter(|uri| !uri.is_empty()).map(str::to_owned),
             )),
-            ("depthai", _) => Err(SensorError::NotBuilt {
-                spec: spec.into(),
-                backend: "DepthAI",
-            }),
+            ("depthai", rest) => Ok(SensorSpec::DepthAi(Box::new(
+                tacmesh_depthai::DepthAiOptions::parse_spec(rest.unwrap_or(""))?,
+            ))),
             _ => Err(unknown()),
         }
     }
@@ -263,6 +266,16 @@ impl SensorSpec {
             }
             SensorSpec::V4l2(v4l2) => open_v4l2(v4l2),
             SensorSpec::OpenNi2(uri) => open_openni2(uri.as_deref()),
+            SensorSpec::DepthAi(options) => {
+                let mut options = options.as_ref().clone();
+                if let tacmesh_depthai::Mode::Replay(replay) = &mut options.mode {
+                    replay.looping |= section.looping;
+                    if section.paced == Some(false) {
+                        replay.max_rate = true;
+                    }
+                }
+                open_depthai(options)
+            }
             SensorSpec::Camsense(port) => Ok(Box::new(tacmesh_serial::CamsenseSource::open(
                 port,
                 glam::Affine3A::IDENTITY,
@@ -338,6 +351,24 @@ fn open_openni2(uri: Option<&str>) -> Result<Box<dyn DepthSource>, SensorError> 
     })
 }
 
+#[cfg(feature = "depthai")]
+fn open_depthai(
+    options: tacmesh_depthai::DepthAiOptions,
+) -> Result<Box<dyn DepthSource>, SensorError> {
+    Ok(Box::new(tacmesh_depthai::DepthAiSource::open(options)?))
+}
+
+#[cfg(not(feature = "depthai"))]
+fn open_depthai(
+    options: tacmesh_depthai::DepthAiOptions,
+) -> Result<Box<dyn DepthSource>, SensorError> {
+    Err(SensorError::FeatureOff {
+        spec: options.name(),
+        backend: "DepthAI",
+        feature: "depthai",
+    })
+}
+
 fn extension(path: &Path) -> String {
     path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -387,8 +418,14 @@ mod tests {
             SensorSpec::parse("openni2:Dummy").unwrap(),
             SensorSpec::OpenNi2(Some("Dummy".into()))
         );
-        let err = SensorSpec::parse("depthai:").unwrap_err();
-        assert!(err.to_string().contains("DepthAI"), "{err}");
+        let SensorSpec::DepthAi(camera) = SensorSpec::parse("depthai:").unwrap() else {
+            panic!("depthai: is a camera")
+        };
+        assert_eq!(camera.name(), "depthai:first device");
+        let recording = SensorSpec::parse("depthai:runs/a.mcap?rate=max").unwrap();
+        assert!(recording.is_recording());
+        let err = SensorSpec::parse("depthai:?fps=0").unwrap_err();
+        assert!(err.to_string().contains("fps"), "{err}");
     }
 
     #[test]
@@ -413,6 +450,21 @@ mod tests {
             text.contains("v4l2") || text.contains("/dev/video2"),
             "{text}"
         );
+    }
+
+    #[test]
+    fn depthai_without_its_feature_says_how_to_build_it() {
+        let spec = SensorSpec::parse("depthai:/nonexistent/run.mcap").unwrap();
+        let err = spec
+            .open(&SensorSection::default())
+            .err()
+            .expect("no such recording");
+        let text = err.to_string();
+        if cfg!(feature = "depthai") {
+            assert!(text.contains("/nonexistent/run.mcap"), "{text}");
+        } else {
+            assert!(text.contains("--features depthai"), "{text}");
+        }
     }
 
     #[test]
