@@ -9,8 +9,8 @@
 //! subscriber saw (upserts, removes, data age at arrival). Prints a Markdown table for
 //! BENCHMARKS.md. Not a test: nothing here asserts a time.
 
-use std::path::PathBuf;
-use std::process::{Command, Stdio};
+mod support;
+
 use std::time::{Duration, Instant};
 
 use tacmesh::protocol::{Message, Stats};
@@ -21,46 +21,27 @@ fn main() {
     let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     let seconds: f64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(60.0);
     let sensor = args.next().unwrap_or_else(|| "sim".into());
-    let dir = tempfile::tempdir().expect("a temporary directory");
-    let socket: PathBuf = dir.path().join("bench.sock");
-
     let replay = sensor.starts_with("replay:");
-    let mut daemon = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
-        .args(["run", "--sensor", &sensor, "--socket"])
-        .arg(&socket)
-        .args(if replay {
-            &["--unpaced", "--loop"][..]
-        } else {
-            &[][..]
-        })
-        .args(["--duration-s", &seconds.to_string()])
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("tacmesh runs");
+    let duration = seconds.to_string();
+    let mut extra = vec!["--duration-s", duration.as_str()];
+    if replay {
+        extra.extend(["--unpaced", "--loop"]);
+    }
+    let support::RunningDaemon {
+        child: mut daemon,
+        socket,
+        dir: _dir,
+    } = support::start_daemon(&sensor, &extra);
     let pid = daemon.id();
 
-    let started = Instant::now();
-    while !socket.exists() {
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "daemon never bound its socket"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
     let mut subscription =
         Subscription::connect(&socket, Some(Duration::from_secs(5))).expect("subscribes");
 
     // RSS sampler: the daemon's peak resident set, from its own high-water mark.
     let rss = std::thread::spawn(move || {
         let mut peak_kib = 0u64;
-        while let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
-            for line in status.lines() {
-                if let Some(v) = line.strip_prefix("VmHWM:") {
-                    let kib: u64 = v.trim().trim_end_matches("kB").trim().parse().unwrap_or(0);
-                    peak_kib = peak_kib.max(kib);
-                }
-            }
+        while let Some(kib) = support::proc_status_kib(pid, "VmHWM") {
+            peak_kib = peak_kib.max(kib);
             std::thread::sleep(Duration::from_millis(200));
         }
         peak_kib
