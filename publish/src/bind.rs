@@ -14,7 +14,7 @@ pub(crate) struct Bound {
     pub(crate) file_id: Option<(u64, u64)>,
 }
 
-pub(crate) fn claim(path: &Path, mode: u32) -> Result<Bound, PublishError> {
+pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound, PublishError> {
     if mode & !0o7777 != 0 {
         return Err(PublishError::InvalidMode { mode });
     }
@@ -45,6 +45,16 @@ pub(crate) fn claim(path: &Path, mode: u32) -> Result<Bound, PublishError> {
             mode,
             source,
         });
+    }
+    if let Some(gid) = group {
+        if let Err(source) = std::os::unix::fs::chown(path, None, Some(gid)) {
+            remove_if_ours(path, file_id);
+            return Err(PublishError::SetGroup {
+                path: path.to_path_buf(),
+                gid,
+                source,
+            });
+        }
     }
     Ok(Bound { listener, file_id })
 }

@@ -56,6 +56,27 @@ pub struct PublisherConfig {
     pub mode: u32,
     /// Sent in `Hello`, e.g. `tacmesh 0.1.0`; at most 64 bytes.
     pub server_name: String,
+    /// Group (gid) to give the socket file, so that members of it may connect (with a mode
+    /// such as `0o660`); `None` leaves the daemon's own group.
+    pub group: Option<u32>,
+    /// Only peers these credentials allow may subscribe; `None` admits whoever the socket
+    /// file's mode lets connect.
+    pub allowed_peers: Option<AllowedPeers>,
+}
+
+/// Which peers may subscribe, by the credentials the kernel reports for the connecting process
+/// (`SO_PEERCRED`: its user id and its primary group id at `connect` time; supplementary
+/// groups are not reported, so list a user's primary group or the user).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AllowedPeers {
+    pub uids: Vec<u32>,
+    pub gids: Vec<u32>,
+}
+
+impl AllowedPeers {
+    pub fn allows(&self, uid: u32, gid: u32) -> bool {
+        self.uids.contains(&uid) || self.gids.contains(&gid)
+    }
 }
 
 impl PublisherConfig {
@@ -65,6 +86,8 @@ impl PublisherConfig {
             socket_path: socket_path.into(),
             mode: DEFAULT_SOCKET_MODE,
             server_name: format!("tacmesh {}", env!("CARGO_PKG_VERSION")),
+            group: None,
+            allowed_peers: None,
         }
     }
 }
@@ -78,6 +101,9 @@ pub struct PublisherCounters {
     /// oversize or wrong-direction frame, or read nothing for [`WRITE_TIMEOUT`]. Subscribers that
     /// simply disconnect are not counted.
     pub clients_dropped: u64,
+    /// Connections refused because the peer's credentials are not in
+    /// [`PublisherConfig::allowed_peers`] (or could not be read).
+    pub clients_refused: u64,
     /// Upsert frames written to subscribers (snapshot and live), summed over subscribers.
     pub meshes_published: u64,
     /// Bytes written to all subscribers.
@@ -141,6 +167,17 @@ pub enum PublishError {
         source: std::io::Error,
     },
 
+    #[error(
+        "cannot give the socket {} to group {gid}: {source}; the daemon's user must be a \
+         member of that group",
+        path.display()
+    )]
+    SetGroup {
+        path: PathBuf,
+        gid: u32,
+        source: std::io::Error,
+    },
+
     #[error("socket mode {mode:o} is not a set of permission bits: give a mode such as 0o660")]
     InvalidMode { mode: u32 },
 
@@ -174,7 +211,9 @@ pub(crate) struct Shared {
     /// [`WRITE_TIMEOUT`] except in tests.
     write_timeout: Duration,
     state: Mutex<State>,
+    allowed_peers: Option<AllowedPeers>,
     clients_dropped: AtomicU64,
+    clients_refused: AtomicU64,
     meshes_published: AtomicU64,
     bytes_sent: AtomicU64,
 }
@@ -238,12 +277,14 @@ impl Publisher {
                 source,
             }
         })?;
-        let bound = bind::claim(&config.socket_path, config.mode)?;
+        let bound = bind::claim(&config.socket_path, config.mode, config.group)?;
         let shared = Arc::new(Shared {
             hello,
             write_timeout,
             state: Mutex::new(State::default()),
+            allowed_peers: config.allowed_peers.clone(),
             clients_dropped: AtomicU64::new(0),
+            clients_refused: AtomicU64::new(0),
             meshes_published: AtomicU64::new(0),
             bytes_sent: AtomicU64::new(0),
         });
@@ -352,6 +393,7 @@ impl Publisher {
         PublisherCounters {
             clients_connected,
             clients_dropped: self.shared.clients_dropped.load(Ordering::Relaxed),
+            clients_refused: self.shared.clients_refused.load(Ordering::Relaxed),
             meshes_published: self.shared.meshes_published.load(Ordering::Relaxed),
             bytes_sent: self.shared.bytes_sent.load(Ordering::Relaxed),
         }
@@ -462,6 +504,9 @@ fn accept_loop(shared: &Arc<Shared>, listener: std::os::unix::net::UnixListener)
 impl Shared {
     /// Registers a new subscriber with the current snapshot and starts its threads.
     fn admit(self: &Arc<Self>, stream: UnixStream) {
+        if !self.peer_allowed(&stream) {
+            return;
+        }
         if let Err(error) = stream.set_write_timeout(Some(self.write_timeout)) {
             tracing::warn!("cannot set up a new subscriber's socket: {error}");
             return;
@@ -485,6 +530,38 @@ impl Shared {
                 tracing::warn!(client = id, "cannot start a subscriber's threads: {error}");
             }
         }
+    }
+
+    /// Whether [`PublisherConfig::allowed_peers`] admits the process at the other end. A
+    /// refused connection is closed without a word and counted; the first refusal and every
+    /// power of two after it are logged, so a client retrying in a loop cannot flood the log.
+    fn peer_allowed(&self, stream: &UnixStream) -> bool {
+        let Some(allowed) = &self.allowed_peers else {
+            return true;
+        };
+        let (verdict, who) = match rustix::net::sockopt::socket_peercred(stream) {
+            Ok(cred) => {
+                let (uid, gid) = (cred.uid.as_raw(), cred.gid.as_raw());
+                (
+                    allowed.allows(uid, gid),
+                    format!("uid {uid} gid {gid} (pid {})", cred.pid.as_raw_nonzero()),
+                )
+            }
+            Err(error) => (
+                false,
+                format!("a peer whose credentials cannot be read ({error})"),
+            ),
+        };
+        if !verdict {
+            let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
+            if refused.is_power_of_two() {
+                tracing::warn!(
+                    "refused a subscriber: {who} is not in socket.allow_users / \
+                     socket.allow_groups ({refused} refused so far)"
+                );
+            }
+        }
+        verdict
     }
 
     /// Disconnects a subscriber: unregisters it, closes its socket, stops its threads. Only the

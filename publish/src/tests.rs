@@ -12,7 +12,7 @@ use tacmesh_protocol::{
 };
 use tacmesh_source::TriMesh;
 
-use crate::{PublishError, Publisher, PublisherConfig};
+use crate::{AllowedPeers, PublishError, Publisher, PublisherConfig};
 
 const WAIT: Duration = Duration::from_secs(5);
 
@@ -372,6 +372,82 @@ fn socket_file_mode_follows_config() {
         assert_eq!(actual, mode);
     }
     assert_eq!(PublisherConfig::new("x").mode, 0o660);
+}
+
+/// This process's user and group, as the kernel will report them for its connections.
+fn own_ids(dir: &tempfile::TempDir) -> (u32, u32) {
+    use std::os::unix::fs::MetadataExt;
+    let probe = dir.path().join("ids");
+    std::fs::write(&probe, b"").unwrap();
+    let metadata = std::fs::metadata(&probe).unwrap();
+    (metadata.uid(), metadata.gid())
+}
+
+#[test]
+fn only_allowed_peers_may_subscribe() {
+    let dir = tempfile::tempdir().unwrap();
+    let (uid, gid) = own_ids(&dir);
+    let others = AllowedPeers {
+        uids: vec![uid.wrapping_add(1)],
+        gids: vec![gid.wrapping_add(1)],
+    };
+    for (name, allowed, admitted) in [
+        ("others", others.clone(), false),
+        (
+            "our uid",
+            AllowedPeers {
+                uids: vec![uid],
+                ..others.clone()
+            },
+            true,
+        ),
+        (
+            "our gid",
+            AllowedPeers {
+                gids: vec![gid],
+                ..others.clone()
+            },
+            true,
+        ),
+    ] {
+        let path = dir.path().join(format!("{}.sock", name.replace(' ', "-")));
+        let mut config = PublisherConfig::new(&path);
+        config.server_name = "tacmesh-test".into();
+        config.allowed_peers = Some(allowed);
+        let publisher = Publisher::bind(config).unwrap();
+        publisher.upsert(upsert(1, 1, 4)).unwrap();
+        let mut client = TestClient::connect(&path);
+        if admitted {
+            client.hello();
+            assert_eq!(client.snapshot(), vec![(1, 1)], "{name}");
+            assert_eq!(publisher.counters().clients_refused, 0, "{name}");
+        } else {
+            // Closed without a word: not even Hello.
+            assert_eq!(client.next(), None, "{name}");
+            wait_until("the refusal is counted", || {
+                publisher.counters().clients_refused == 1
+            });
+            assert_eq!(publisher.counters().clients_connected, 0);
+            // Retrying is refused every time, and counted.
+            let mut again = TestClient::connect(&path);
+            assert_eq!(again.next(), None);
+            wait_until("both refusals", || {
+                publisher.counters().clients_refused == 2
+            });
+        }
+    }
+}
+
+#[test]
+fn the_socket_file_gets_the_configured_group() {
+    use std::os::unix::fs::MetadataExt;
+    let dir = tempfile::tempdir().unwrap();
+    let (_, gid) = own_ids(&dir);
+    let path = socket_in(&dir);
+    let mut config = PublisherConfig::new(&path);
+    config.group = Some(gid);
+    let _publisher = Publisher::bind(config).unwrap();
+    assert_eq!(std::fs::metadata(&path).unwrap().gid(), gid);
 }
 
 #[test]
