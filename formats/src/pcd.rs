@@ -306,8 +306,9 @@ enum Layout {
 /// Converts ascii lines, one point each, to packed little-endian records.
 fn ascii_records(data: &[u8], header: &Header, name: &str) -> Result<Vec<u8>, FormatError> {
     let n = header.points;
-    // Every point needs at least two bytes ("0\n"), so this bounds what a lying header costs.
-    let mut records = Vec::with_capacity(n.min(data.len() / 2) * header.record_size);
+    // Every value needs at least two bytes of text ("0 ") and packs to at most 8, so the
+    // records cannot outgrow four times the text, whatever COUNT and POINTS claim.
+    let mut records = Vec::with_capacity((n * header.record_size).min(4 * data.len()));
     let mut read = 0;
     for (i, line) in data.split(|&b| b == b'\n').enumerate() {
         if read == n {
@@ -670,6 +671,18 @@ mod tests {
         bytes.extend(b"1 1 2 3\n");
         let err = parse(&bytes, "c.pcd").unwrap_err().to_string();
         assert_eq!(err, "c.pcd: field x has COUNT 2; expected 1");
+    }
+
+    /// Found by fuzzing (`fuzz/`, target `pcd`): the ascii reader reserved POINTS × record
+    /// size before reading a line, so a histogram field with a COUNT of 10^15 asked for
+    /// 10^17 bytes and aborted the process.
+    #[test]
+    fn ascii_pcd_with_huge_count_is_an_error_not_an_allocation() {
+        let mut bytes = header("x y z h", "4 4 4 8", "F F F F", 11, "ascii");
+        bytes.splice(0..0, b"COUNT 1 1 1 1888888888888888\n".iter().copied());
+        bytes.extend(b"1 2 3 4\n".repeat(11));
+        let err = parse(&bytes, "n.pcd").unwrap_err().to_string();
+        assert_eq!(err, "n.pcd: line 11 ends before field h");
     }
 
     #[test]

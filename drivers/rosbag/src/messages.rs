@@ -117,6 +117,11 @@ impl Image {
                 self.data.len()
             )));
         }
+        // No pixels, however many rows it claims: with step 0 nothing bounds the row count, and
+        // walking 4 billion empty rows took seconds (found writing the fuzz target in `fuzz/`).
+        if w == 0 {
+            return Ok(Vec::new());
+        }
         let mut out = Vec::with_capacity((w * h) as usize);
         for row in 0..h as usize {
             let start = row * step as usize;
@@ -309,6 +314,13 @@ mod tests {
         assert_eq!(img.header.frame_id, "cam");
         assert_eq!(img.header.stamp, Time { sec: 100, nsec: 5 });
         assert_eq!(img.depth_u16().unwrap(), vec![1, 2, 3, 0x0104]);
+    }
+
+    /// Without the zero-width shortcut this walks 4 billion empty rows (seconds per message).
+    #[test]
+    fn zero_width_depth_with_four_billion_rows_is_empty() {
+        let img = Image::decode(&image_bytes(0, u32::MAX, "mono16", false, 0, &[])).unwrap();
+        assert_eq!(img.depth_u16().unwrap(), Vec::<u16>::new());
     }
 
     #[test]
