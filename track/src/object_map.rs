@@ -1,5 +1,5 @@
 //! The object map: every tracked object, updated frame by frame, in pipeline order: clean the
-//! clusters → expire tracks → associate → align and fuse → create tracks → (later, on the
+//! clusters → associate → align and fuse → create tracks → expire tracks → (later, on the
 //! mesher's schedule) hand out mesh jobs.
 
 use std::collections::BTreeMap;
@@ -140,19 +140,6 @@ impl ObjectMap {
             .map(|c| clean_cluster(c, self.config.min_cluster_points))
             .collect();
 
-        let leave_after = self.config.leave_after;
-        let expired: Vec<u64> = self
-            .objects
-            .values()
-            .filter(|o| now.saturating_sub(o.last_seen) > leave_after)
-            .map(|o| o.id)
-            .collect();
-        for id in expired {
-            self.objects.remove(&id);
-            info!(id, "object left");
-            report.removed.push(id);
-        }
-
         let ids: Vec<u64> = self.objects.keys().copied().collect();
         let predicted: Vec<Vec3> = self
             .objects
@@ -252,6 +239,22 @@ impl ObjectMap {
             self.objects.insert(id, object);
             report.created.push(id);
             report.cluster_ids[ci] = Some(id);
+        }
+
+        // Expired only after matching: a track this frame saw is not gone, however long the
+        // sensor was silent before it (expiring first wiped the whole map after any outage
+        // longer than `leave_after`, and every object came back under a new id).
+        let leave_after = self.config.leave_after;
+        let expired: Vec<u64> = self
+            .objects
+            .values()
+            .filter(|o| now.saturating_sub(o.last_seen) > leave_after)
+            .map(|o| o.id)
+            .collect();
+        for id in expired {
+            self.objects.remove(&id);
+            info!(id, "object left");
+            report.removed.push(id);
         }
 
         debug!(

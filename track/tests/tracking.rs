@@ -266,6 +266,31 @@ fn vanished_object_is_removed_and_its_id_not_reused() {
     assert_eq!(report.cluster_ids, vec![Some(2)]);
 }
 
+/// A sensor outage (no frames at all) longer than `leave_after` is not an object leaving: the
+/// first frame after it sees the object where it was, and the object keeps its id and its
+/// fused state.
+#[test]
+fn an_object_seen_again_after_a_sensor_outage_keeps_its_id() {
+    let mut rng = rng(6);
+    let mut map = map();
+    let pose = at(0.0, 0.0, 0.6);
+    for i in 0..10 {
+        map.integrate(&frame(
+            i,
+            vec![view(CUBE, pose, Vec3::ZERO, 1000, SIGMA_M, &mut rng)],
+        ));
+    }
+    // 3 s without a frame, then the cube again.
+    let report = map.integrate(&frame(
+        100,
+        vec![view(CUBE, pose, Vec3::ZERO, 1000, SIGMA_M, &mut rng)],
+    ));
+    assert!(report.removed.is_empty(), "{:?}", report.removed);
+    assert!(report.created.is_empty(), "{:?}", report.created);
+    assert_eq!(report.cluster_ids, vec![Some(1)]);
+    assert_eq!(map.len(), 1);
+}
+
 #[test]
 fn a_different_shape_in_place_resets_the_object() {
     let mut rng = rng(6);
