@@ -17,7 +17,7 @@ use tacmesh::subscriber::Subscription;
 use tacmesh::TriMesh;
 
 /// Support planes have ids from here up (see `tacmesh::daemon::planes`).
-const FIRST_PLANE_ID: u64 = 1 << 32;
+pub(crate) const FIRST_PLANE_ID: u64 = 1 << 32;
 
 pub static ONE_DAEMON_AT_A_TIME: Mutex<()> = Mutex::new(());
 
@@ -110,16 +110,16 @@ impl Drop for Daemon {
 
 /// Every message a subscriber received, with when.
 #[derive(Default)]
-struct Received {
-    upserts: Vec<(Instant, Upsert)>,
-    removes: Vec<(Instant, u64)>,
-    stats: Vec<(Instant, tacmesh::protocol::Stats)>,
-    goodbye: bool,
+pub(crate) struct Received {
+    pub(crate) upserts: Vec<(Instant, Upsert)>,
+    pub(crate) removes: Vec<(Instant, u64)>,
+    pub(crate) stats: Vec<(Instant, tacmesh::protocol::Stats)>,
+    pub(crate) goodbye: bool,
 }
 
 impl Received {
     /// Reads until `until` (or the connection ends).
-    fn collect(subscription: &mut Subscription, until: Instant, into: &mut Received) {
+    pub(crate) fn collect(subscription: &mut Subscription, until: Instant, into: &mut Received) {
         while Instant::now() < until && !into.goodbye {
             match subscription.next_message() {
                 Ok(Message::Upsert(u)) => into.upserts.push((Instant::now(), u)),
@@ -132,7 +132,7 @@ impl Received {
         }
     }
 
-    fn latest_meshes(&self) -> BTreeMap<u64, &Upsert> {
+    pub(crate) fn latest_meshes(&self) -> BTreeMap<u64, &Upsert> {
         let mut latest = BTreeMap::new();
         for (_, u) in &self.upserts {
             latest.insert(u.object_id, u);
@@ -164,7 +164,7 @@ fn mean(values: &[f32]) -> f32 {
     values.iter().sum::<f32>() / values.len().max(1) as f32
 }
 
-const STATIC_SCENE: &str = r#"
+pub(crate) const STATIC_SCENE: &str = r#"
 [camera]
 eye = [0.0, -0.8485, 0.8485]
 target = [0.0, 0.0, 0.0]

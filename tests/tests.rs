@@ -6,4 +6,5 @@ mod cli_errors;
 mod daemon;
 mod offline_pipeline;
 mod real_scans;
+mod reliability;
 mod replay;

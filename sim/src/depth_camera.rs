@@ -50,6 +50,7 @@ use tacmesh_source::{
 };
 
 use crate::dynamic_scene::{DynamicScene, DynamicSceneBvh};
+use crate::faults::{check_faults, fault_at, Fault, FaultKind};
 use crate::scene::{RayHit, Scene, SceneBvh, SceneError, SceneObject};
 
 /// The sensor's noise model. All probabilities are per pixel and per frame.
@@ -214,6 +215,9 @@ pub enum DepthCameraError {
     #[error("world_from_sensor must be finite and invertible, got {world_from_sensor:?}")]
     InvalidPose { world_from_sensor: Affine3A },
 
+    #[error("injected faults: {reason}")]
+    InvalidFaults { reason: String },
+
     #[error("cannot start {threads} render threads: lower render_threads (1 renders on the calling thread)")]
     RenderThreads {
         threads: usize,
@@ -290,6 +294,8 @@ pub struct SimulatedDepthCamera {
     pool: Option<rayon::ThreadPool>,
     frame_index: u64,
     next_due: Option<Instant>,
+    /// Injected faults by frame index (see [`set_faults`](Self::set_faults)); none by default.
+    faults: Vec<Fault>,
 }
 
 impl SimulatedDepthCamera {
@@ -330,6 +336,7 @@ impl SimulatedDepthCamera {
             pool,
             frame_index: 0,
             next_due: None,
+            faults: Vec::new(),
         };
         let nothing = vec![SceneHit::NONE; camera.rays_in_sensor.len()];
         camera.static_hits = camera.cast_rays(&camera.bvh.static_part(), &nothing, |hit, _| hit);
@@ -363,6 +370,19 @@ impl SimulatedDepthCamera {
     /// The scene the camera looks at, at all times.
     pub fn scene(&self) -> &DynamicScene {
         &self.scene
+    }
+
+    /// Makes frames of the given indices fail or come out malformed (see [`Fault`]); replaces
+    /// any faults set before. Fails, naming them, on faults that cover no frame or overlap.
+    pub fn set_faults(&mut self, faults: Vec<Fault>) -> Result<(), DepthCameraError> {
+        check_faults(&faults).map_err(|reason| DepthCameraError::InvalidFaults { reason })?;
+        self.faults = faults;
+        Ok(())
+    }
+
+    /// The injected faults.
+    pub fn faults(&self) -> &[Fault] {
+        &self.faults
     }
 
     /// The scene time frame `frame_index` shows: `frame_index / fps` seconds, wrapped by the
@@ -671,12 +691,64 @@ impl DepthSource for SimulatedDepthCamera {
     }
 
     /// Paces to `rate_fps` if set, then renders the next frame, stamped with the host's
-    /// monotonic clock ([`monotonic_now`]) when rendering began (its capture time).
+    /// monotonic clock ([`monotonic_now`]) when rendering began (its capture time). A frame
+    /// with an injected fault ([`set_faults`](Self::set_faults)) is paced like any other and
+    /// then fails or comes out malformed as its [`FaultKind`] says.
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
         self.pace();
         let capture_time = monotonic_now();
-        let frame = self.render(self.frame_index, capture_time);
+        let mut frame_index = self.frame_index;
         self.frame_index += 1;
+        let Some(&fault) = fault_at(&self.faults, frame_index) else {
+            return Ok(Observation::Depth(self.render(frame_index, capture_time)));
+        };
+        let kind = fault.kind;
+        let reason = format!("injected fault {} at frame {frame_index}", kind.name());
+        let pixels = self.rays_in_sensor.len();
+        let blank = |depth_m: Vec<f32>| DepthFrame {
+            intrinsics: self.config.intrinsics,
+            depth_m,
+            world_from_sensor: self.config.world_from_sensor,
+            capture_time,
+        };
+        let frame = match kind {
+            FaultKind::Error => {
+                return Err(SourceError::Malformed {
+                    device: self.name.clone(),
+                    reason,
+                })
+            }
+            FaultKind::Disconnect => {
+                return Err(SourceError::Disconnected {
+                    device: self.name.clone(),
+                    reason,
+                })
+            }
+            FaultKind::WrongSize => {
+                let mut frame = self.render(frame_index, capture_time);
+                frame.depth_m.truncate(pixels / 2);
+                frame
+            }
+            FaultKind::Zeros => blank(vec![0.0; pixels]),
+            FaultKind::Nan => blank(vec![f32::NAN; pixels]),
+            FaultKind::AbsurdIntrinsics => {
+                let mut frame = self.render(frame_index, capture_time);
+                frame.intrinsics.fx = 0.0;
+                frame.intrinsics.fy = f32::NAN;
+                frame
+            }
+            FaultKind::Stall => {
+                let left = fault.frames().end - frame_index;
+                thread::sleep(Duration::from_secs_f64(
+                    left as f64 / f64::from(self.config.fps),
+                ));
+                // The frames of the window are lost; the schedule starts again from now.
+                frame_index = fault.frames().end;
+                self.frame_index = frame_index + 1;
+                self.next_due = None;
+                self.render(frame_index, monotonic_now())
+            }
+        };
         Ok(Observation::Depth(frame))
     }
 }
@@ -889,6 +961,75 @@ mod tests {
             Observation::Depth(frame) => frame,
             other => panic!("expected a depth frame, got {other:?}"),
         }
+    }
+
+    /// Each injected fault makes exactly its frames fail or come out malformed, as its kind
+    /// says, and the frames around them are the camera's normal frames.
+    #[test]
+    fn injected_faults_break_exactly_their_frames() {
+        let mut camera = floor_camera(2.0, DepthNoise::NONE);
+        let kinds = FaultKind::ALL;
+        let faults = kinds
+            .iter()
+            .enumerate()
+            .map(|(k, &kind)| Fault {
+                kind,
+                at_frame: 1 + 2 * k as u64,
+                frames: 1,
+            })
+            .collect();
+        camera.set_faults(faults).unwrap();
+        let pixels = (DEFAULT_INTRINSICS.width * DEFAULT_INTRINSICS.height) as usize;
+        for (k, &kind) in kinds.iter().enumerate() {
+            let good = depth_of(camera.next_observation().unwrap());
+            assert!(good.is_consistent() && good.depth_m.iter().all(|&z| (z - 2.0).abs() < 1e-4));
+            let stall_started = Instant::now();
+            let faulty = camera.next_observation();
+            // A stall skips its window: the camera delivers the frame after it.
+            let skipped = u64::from(kind == FaultKind::Stall);
+            assert_eq!(camera.frame_index(), 2 + 2 * k as u64 + skipped);
+            match (kind, faulty) {
+                (FaultKind::Error, Err(SourceError::Malformed { reason, .. }))
+                | (FaultKind::Disconnect, Err(SourceError::Disconnected { reason, .. })) => {
+                    assert!(reason.contains(kind.name()), "{reason}");
+                }
+                (FaultKind::WrongSize, Ok(Observation::Depth(frame))) => {
+                    assert_eq!(frame.depth_m.len(), pixels / 2);
+                    assert!(!frame.is_consistent());
+                }
+                (FaultKind::Zeros, Ok(Observation::Depth(frame))) => {
+                    assert!(frame.is_consistent() && frame.depth_m.iter().all(|&z| z == 0.0));
+                }
+                (FaultKind::Nan, Ok(Observation::Depth(frame))) => {
+                    assert!(frame.is_consistent() && frame.depth_m.iter().all(|z| z.is_nan()));
+                }
+                (FaultKind::Stall, Ok(Observation::Depth(frame))) => {
+                    // One frame at 30 fps; then the frame after the window, which this scene
+                    // shows the same.
+                    assert!(stall_started.elapsed() >= Duration::from_millis(33));
+                    assert_eq!(frame.depth_m, good.depth_m);
+                }
+                (FaultKind::AbsurdIntrinsics, Ok(Observation::Depth(frame))) => {
+                    assert!(frame.is_consistent());
+                    assert!(frame.intrinsics.fx == 0.0 && frame.intrinsics.fy.is_nan());
+                    assert_eq!(frame.depth_m, good.depth_m);
+                }
+                (kind, other) => panic!("{kind:?}: {other:?}"),
+            }
+        }
+        assert!(depth_of(camera.next_observation().unwrap()).is_consistent());
+        let overlapping = vec![
+            Fault {
+                kind: FaultKind::Nan,
+                at_frame: 0,
+                frames: 2,
+            };
+            2
+        ];
+        assert!(matches!(
+            camera.set_faults(overlapping),
+            Err(DepthCameraError::InvalidFaults { .. })
+        ));
     }
 
     /// Möller–Trumbore against every triangle: the exact nearest hit, independent of parry.

@@ -17,6 +17,9 @@
 //! - [`Scene`] (static) and [`DynamicScene`] (objects with a [`Motion`] along [`Waypoint`]s,
 //!   appearing and leaving, optionally looping); [`SceneFile`] reads both the scene and the
 //!   camera from TOML (`scenes/*.toml` at the workspace root; [`SceneFile::demo`] is embedded).
+//! - [`Fault`]: a [`FaultKind`] (read error, disconnect, wrong size, zeros, NaN, absurd
+//!   intrinsics, a stalled read) injected into the camera's frames by index, from a scene
+//!   file's `[[fault]]` tables or [`SimulatedDepthCamera::set_faults`].
 //! - [`mesh_distance`]: the symmetric sampled surface distance between two meshes
 //!   ([`MeshDistance::mhe_m`] is the paper's MHE; use [`PAPER_SAMPLES`] per side);
 //!   [`point_to_mesh_distances`] gives the exact unsigned distance from points to a surface.
@@ -27,6 +30,7 @@
 
 mod depth_camera;
 mod dynamic_scene;
+mod faults;
 mod metric;
 mod motion;
 mod sampling;
@@ -42,6 +46,7 @@ pub use depth_camera::{
     DEFAULT_INTRINSICS, DEFAULT_VIEW_DISTANCE_M,
 };
 pub use dynamic_scene::{DynamicObject, DynamicScene, DynamicSceneBvh};
+pub use faults::{check_faults, Fault, FaultKind};
 pub use metric::{mesh_distance, point_to_mesh_distances, MeshDistance, PAPER_SAMPLES};
 pub use motion::{Motion, PathMode, Waypoint};
 pub use sampling::{sample_cloud, SampleConfig, SurfaceSampler};

@@ -32,6 +32,10 @@
 //! [object.path]                     # instead of position: waypoints
 //! mode = "pingpong"                 # once | loop | pingpong
 //! waypoints = [{ time_s = 0.0, position = [0.0, 0.3] }, { time_s = 4.0, position = [0.4, 0.3] }]
+//! [[fault]]                         # optional, repeatable: an injected sensor fault
+//! kind = "zeros"                    # error, disconnect, wrong_size, zeros, nan, absurd_intrinsics, stall
+//! at_frame = 90                     # the first frame index affected (from 0)
+//! frames = 10                       # how many frames, default 1
 //! ```
 //!
 //! Placement rule: an object's frame has its origin at the centre of the bottom face of its
@@ -56,9 +60,10 @@ use tacmesh_source::{Intrinsics, TriMesh};
 
 use crate::depth_camera::check_config;
 use crate::{
-    check_mesh, fit_to_extent, look_at, DepthCameraConfig, DepthCameraError, DepthNoise,
-    DynamicObject, DynamicScene, Motion, PathMode, Shape, SimulatedDepthCamera, Waypoint,
-    DEFAULT_INTRINSICS, TABLETOP_OBJECT_EXTENT_M, TABLETOP_TABLE_SIDE_M,
+    check_faults, check_mesh, fit_to_extent, look_at, DepthCameraConfig, DepthCameraError,
+    DepthNoise, DynamicObject, DynamicScene, Fault, FaultKind, Motion, PathMode, Shape,
+    SimulatedDepthCamera, Waypoint, DEFAULT_INTRINSICS, TABLETOP_OBJECT_EXTENT_M,
+    TABLETOP_TABLE_SIDE_M,
 };
 
 /// The text of `scenes/demo.toml`, the daemon's default scene.
@@ -71,6 +76,8 @@ pub struct SceneFile {
     pub name: String,
     pub scene: DynamicScene,
     pub camera: DepthCameraConfig,
+    /// Injected sensor faults (`[[fault]]`), none in a normal scene.
+    pub faults: Vec<Fault>,
 }
 
 /// Why a scene file could not be used. Every message starts with the file.
@@ -96,6 +103,13 @@ pub enum SceneFileError {
 
     #[error("{file}: {reason}")]
     Scene { file: String, reason: String },
+
+    #[error("{file}:{line}: [[fault]]: {reason}")]
+    Fault {
+        file: String,
+        line: usize,
+        reason: String,
+    },
 
     #[error("{file}:{line}: object {id} ({name}): {reason}")]
     Object {
@@ -177,6 +191,7 @@ impl SceneFile {
                 });
             }
         }
+        let faults = context.faults(&raw.faults)?;
         let name = Path::new(name_for_errors)
             .file_stem()
             .map_or_else(|| "scene".to_owned(), |s| s.to_string_lossy().into_owned());
@@ -187,6 +202,7 @@ impl SceneFile {
                 loop_s: raw.loop_s,
             },
             camera,
+            faults,
         })
     }
 
@@ -204,7 +220,10 @@ impl SceneFile {
     /// The camera this file describes, named `sim:<name>`. Fails only if the public fields
     /// were changed into something invalid after parsing.
     pub fn into_camera(self) -> Result<SimulatedDepthCamera, DepthCameraError> {
-        SimulatedDepthCamera::new(format!("sim:{}", self.name), self.scene, self.camera)
+        let mut camera =
+            SimulatedDepthCamera::new(format!("sim:{}", self.name), self.scene, self.camera)?;
+        camera.set_faults(self.faults)?;
+        Ok(camera)
     }
 }
 
@@ -219,6 +238,16 @@ struct RawFile {
     table: Option<RawTable>,
     #[serde(default, rename = "object")]
     objects: Vec<toml::Spanned<RawObject>>,
+    #[serde(default, rename = "fault")]
+    faults: Vec<toml::Spanned<RawFault>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFault {
+    kind: String,
+    at_frame: u64,
+    frames: Option<u64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -575,6 +604,41 @@ impl Context<'_> {
     }
 }
 
+impl Context<'_> {
+    /// The `[[fault]]` tables, in file order, checked for unknown kinds, empty windows and
+    /// overlaps.
+    fn faults(&self, raw: &[toml::Spanned<RawFault>]) -> Result<Vec<Fault>, SceneFileError> {
+        let fail = |spanned: &toml::Spanned<RawFault>, reason: String| SceneFileError::Fault {
+            file: self.file.to_owned(),
+            line: self.line(spanned.span()),
+            reason,
+        };
+        let mut faults = Vec::with_capacity(raw.len());
+        for spanned in raw {
+            let fault = spanned.get_ref();
+            let kind = FaultKind::from_name(&fault.kind).ok_or_else(|| {
+                let known: Vec<&str> = FaultKind::ALL.iter().map(|k| k.name()).collect();
+                fail(
+                    spanned,
+                    format!(
+                        "unknown kind \"{}\": use one of {}",
+                        fault.kind,
+                        known.join(", ")
+                    ),
+                )
+            })?;
+            faults.push(Fault {
+                kind,
+                at_frame: fault.at_frame,
+                frames: fault.frames.unwrap_or(1),
+            });
+            // Checked as they come, so that the error names the table that broke the rule.
+            check_faults(&faults).map_err(|reason| fail(spanned, reason))?;
+        }
+        Ok(faults)
+    }
+}
+
 /// Fits `mesh` to `size_m` (largest bounding-box side) if given, keeping its scale otherwise,
 /// and moves it so the centre of its bounding box's bottom face is the origin.
 fn rest_on_origin(mesh: &mut TriMesh, size_m: Option<f32>) {
@@ -823,6 +887,51 @@ mod tests {
         assert!(bad_fps.contains("fps"), "{bad_fps}");
         let bad_loop = error("loop_s = -1\n");
         assert!(bad_loop.contains("loop_s"), "{bad_loop}");
+    }
+
+    #[test]
+    fn faults_are_read_and_checked() {
+        let file = parse(
+            "[[fault]]\nkind = \"zeros\"\nat_frame = 90\nframes = 10\n\
+             [[fault]]\nkind = \"disconnect\"\nat_frame = 240\n",
+        )
+        .unwrap();
+        assert_eq!(
+            file.faults,
+            [
+                Fault {
+                    kind: FaultKind::Zeros,
+                    at_frame: 90,
+                    frames: 10
+                },
+                Fault {
+                    kind: FaultKind::Disconnect,
+                    at_frame: 240,
+                    frames: 1
+                }
+            ]
+        );
+        assert_eq!(file.clone().into_camera().unwrap().faults(), file.faults);
+        assert!(SceneFile::demo().faults.is_empty());
+
+        let unknown = error("[[fault]]\nkind = \"hang\"\nat_frame = 1\n");
+        assert!(
+            unknown.starts_with("test.toml:1: [[fault]]: unknown kind \"hang\""),
+            "{unknown}"
+        );
+        assert!(unknown.contains("absurd_intrinsics"), "{unknown}");
+        let overlap = error(
+            "[[fault]]\nkind = \"nan\"\nat_frame = 5\nframes = 5\n\n\
+             [[fault]]\nkind = \"zeros\"\nat_frame = 9\n",
+        );
+        assert!(
+            overlap.starts_with("test.toml:6: [[fault]]") && overlap.contains("overlap"),
+            "{overlap}"
+        );
+        let empty = error("[[fault]]\nkind = \"nan\"\nat_frame = 5\nframes = 0\n");
+        assert!(empty.contains("at least 1"), "{empty}");
+        let missing = error("[[fault]]\nkind = \"nan\"\n");
+        assert!(missing.contains("at_frame"), "{missing}");
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use tacmesh_segment::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
-use tacmesh_source::{DepthFrame, Observation};
+use tacmesh_source::{FrameError, Observation};
 use tacmesh_track::{FrameClusters, ObjectMap, TrackConfig};
 
 use super::config::DaemonConfig;
@@ -67,8 +67,8 @@ impl Perception {
         let started = Instant::now();
         let (points, organised, capture_time, viewpoint) = match observation {
             Observation::Depth(frame) => {
-                if !frame.is_consistent() {
-                    self.malformed(shared, &frame);
+                if let Err(err) = frame.check() {
+                    self.malformed(shared, &err);
                     return;
                 }
                 self.malformed_logged = false;
@@ -189,16 +189,13 @@ impl Perception {
         }
     }
 
-    fn malformed(&mut self, shared: &Shared, frame: &DepthFrame) {
+    fn malformed(&mut self, shared: &Shared, err: &FrameError) {
         Counters::add(&shared.counters.malformed_frames, 1);
         // Once per burst: a source that sends bad frames sends many.
         if !self.malformed_logged {
             tracing::warn!(
-                "dropping a malformed frame: {}×{} intrinsics but {} depth values (logged once \
-                 per burst; see the malformed-frame counter)",
-                frame.intrinsics.width,
-                frame.intrinsics.height,
-                frame.depth_m.len()
+                "dropping a malformed frame: {err} (logged once per burst; see the \
+                 malformed-frame counter)"
             );
         }
         self.malformed_logged = true;

@@ -33,6 +33,20 @@ pub struct DepthFrame {
     pub capture_time: Duration,
 }
 
+/// Why a depth frame cannot be used. A source that sends one sends a malformed frame; the
+/// daemon counts it and skips it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrameError {
+    #[error("{width}×{height} intrinsics but {values} depth values: the driver's buffer does not match its resolution")]
+    WrongSize {
+        width: u32,
+        height: u32,
+        values: usize,
+    },
+    #[error("unusable intrinsics {intrinsics:?}: the size must be non-zero, the focal lengths finite and non-zero and the principal point finite (is the calibration corrupt?)")]
+    BadIntrinsics { intrinsics: Intrinsics },
+}
+
 /// A depth frame turned into points: the valid pixels' points in the world frame, in row-major
 /// pixel order, and how many pixels had no usable reading.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -45,6 +59,31 @@ impl DepthFrame {
     /// Whether the depth buffer has exactly `width * height` entries.
     pub fn is_consistent(&self) -> bool {
         self.depth_m.len() == self.intrinsics.width as usize * self.intrinsics.height as usize
+    }
+
+    /// Whether the frame can be deprojected: a non-zero size, finite non-zero focal lengths, a
+    /// finite principal point, and exactly `width * height` depth values. A frame that fails
+    /// would deproject to no points (a zero or NaN focal length makes every ray non-finite)
+    /// without a single pixel counted as invalid, or to points at the wrong pixels.
+    pub fn check(&self) -> Result<(), FrameError> {
+        let k = self.intrinsics;
+        let focal_ok = |f: f32| f.is_finite() && f != 0.0;
+        if k.width == 0
+            || k.height == 0
+            || !focal_ok(k.fx)
+            || !focal_ok(k.fy)
+            || !(k.cx.is_finite() && k.cy.is_finite())
+        {
+            return Err(FrameError::BadIntrinsics { intrinsics: k });
+        }
+        if !self.is_consistent() {
+            return Err(FrameError::WrongSize {
+                width: k.width,
+                height: k.height,
+                values: self.depth_m.len(),
+            });
+        }
+        Ok(())
     }
 
     /// Back-projects every pixel with a reading in `(0, max_range_m]` through the pinhole model
@@ -132,6 +171,51 @@ mod tests {
         assert_eq!(d.points_in_world.len(), 4);
         assert!(d.points_in_world[0].is_nan() && d.points_in_world[3].is_nan());
         assert_eq!(d.points_in_world[2], Vec3::new(-0.5, 0.5, 3.0));
+    }
+
+    /// A zero or NaN focal length turned every pixel into a non-finite "point" that no
+    /// counter saw: the frame must be refused as malformed instead.
+    #[test]
+    fn check_refuses_absurd_intrinsics_and_wrong_sizes() {
+        let good = frame(vec![1.0; 4]);
+        assert_eq!(good.check(), Ok(()));
+        let with = |change: fn(&mut Intrinsics)| {
+            let mut bad = good.clone();
+            change(&mut bad.intrinsics);
+            bad.check()
+        };
+        let absurd: [fn(&mut Intrinsics); 6] = [
+            |k| k.fx = 0.0,
+            |k| k.fy = f32::NAN,
+            |k| k.fx = f32::INFINITY,
+            |k| k.cx = f32::NAN,
+            |k| k.cy = f32::NEG_INFINITY,
+            |k| k.width = 0,
+        ];
+        for change in absurd {
+            assert!(
+                matches!(with(change), Err(FrameError::BadIntrinsics { .. })),
+                "{:?}",
+                with(change)
+            );
+        }
+        // Without the check, the fx = 0 frame deprojects to nothing with nothing invalid.
+        let mut fx_zero = good.clone();
+        fx_zero.intrinsics.fx = 0.0;
+        let d = fx_zero.deproject(5.0);
+        assert!(d.points_in_world.iter().all(|p| !p.is_finite()) && d.invalid_pixels == 0);
+        let short = frame(vec![1.0; 3]).check().unwrap_err();
+        assert_eq!(
+            short,
+            FrameError::WrongSize {
+                width: 2,
+                height: 2,
+                values: 3
+            }
+        );
+        assert!(short
+            .to_string()
+            .contains("2×2 intrinsics but 3 depth values"));
     }
 
     #[test]

@@ -18,7 +18,7 @@ mod source;
 
 pub use clock::monotonic_now;
 pub use cloud::PointCloud;
-pub use frame::{Deprojection, DepthFrame, Intrinsics};
+pub use frame::{Deprojection, DepthFrame, FrameError, Intrinsics};
 pub use mesh::TriMesh;
 pub use source::{DepthSource, Observation, SourceError};
 
