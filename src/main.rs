@@ -8,7 +8,7 @@ use clap::Parser;
 
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
-    cli::init_logging(args.verbose);
+    // Logging is set up by `cli::run`, once the command has read its config.
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {

@@ -8,3 +8,4 @@ mod offline_pipeline;
 mod real_scans;
 mod reliability;
 mod replay;
+mod systemd;

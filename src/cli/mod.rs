@@ -47,24 +47,97 @@ enum Command {
     Sim(sim::SimCommand),
 }
 
-pub fn init_logging(verbose: u8) {
-    let default = match verbose {
-        0 => "info",
+/// Logging to standard error, set up once, when the command knows its settings. The filter:
+/// `RUST_LOG` when set, else `-v` (debug) or `-vv` (trace), else `config_level` (the daemon
+/// config's `[log] level`), else info. Colours only on a terminal. When standard error is the
+/// journal (systemd names it in `JOURNAL_STREAM`), lines carry no timestamp, since the journal
+/// stamps each entry itself, and start with their syslog priority (`<4>` for a warning), which
+/// journald turns into the entry's priority (`journalctl -p warning`).
+pub fn init_logging(verbose: u8, config_level: Option<&str>) {
+    let fallback = match verbose {
+        0 => config_level.unwrap_or("info"),
         1 => "debug",
         _ => "trace",
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
-    tracing_subscriber::fmt()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fallback));
+    let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+        .with_writer(std::io::stderr);
+    if stderr_is_journal() {
+        builder
+            .with_ansi(false)
+            .event_format(JournalPriority(
+                tracing_subscriber::fmt::format()
+                    .without_time()
+                    .with_level(false),
+            ))
+            .init();
+    } else {
+        builder
+            .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+            .init();
+    }
+}
+
+/// True when standard error is the journal stream that `JOURNAL_STREAM` (`DEVICE:INODE`)
+/// names; a process whose standard error was redirected elsewhere inherits the variable but
+/// not the stream, so the variable alone is not enough (systemd.exec(5)).
+fn stderr_is_journal() -> bool {
+    use std::os::fd::AsFd;
+    use std::os::unix::fs::MetadataExt;
+    let Some(stream) = std::env::var_os("JOURNAL_STREAM") else {
+        return false;
+    };
+    let Some((device, inode)) = stream.to_str().and_then(|s| s.split_once(':')) else {
+        return false;
+    };
+    let Ok(stderr) = std::io::stderr().as_fd().try_clone_to_owned() else {
+        return false;
+    };
+    let Ok(metadata) = std::fs::File::from(stderr).metadata() else {
+        return false;
+    };
+    device.parse() == Ok(metadata.dev()) && inode.parse() == Ok(metadata.ino())
+}
+
+/// An event format that starts each line with its syslog priority (`<3>` error, `<4>` warning,
+/// `<6>` info, `<7>` debug and trace), as journald reads it from a service's output, then the
+/// level's name (unpadded: journald keeps what follows the priority as it is).
+struct JournalPriority<F>(F);
+
+impl<S, N, F> tracing_subscriber::fmt::FormatEvent<S, N> for JournalPriority<F>
+where
+    S: tracing::Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
+    N: for<'a> tracing_subscriber::fmt::FormatFields<'a> + 'static,
+    F: tracing_subscriber::fmt::FormatEvent<S, N>,
+{
+    fn format_event(
+        &self,
+        ctx: &tracing_subscriber::fmt::FmtContext<'_, S, N>,
+        mut writer: tracing_subscriber::fmt::format::Writer<'_>,
+        event: &tracing::Event<'_>,
+    ) -> std::fmt::Result {
+        let level = *event.metadata().level();
+        let priority = match level {
+            tracing::Level::ERROR => 3,
+            tracing::Level::WARN => 4,
+            tracing::Level::INFO => 6,
+            tracing::Level::DEBUG | tracing::Level::TRACE => 7,
+        };
+        write!(writer, "<{priority}>{level} ")?;
+        self.0.format_event(ctx, writer, event)
+    }
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    // `run` sets up logging itself once it has read its config (for `[log] level`); a bad
+    // config is reported by `main`, which needs no logging.
+    if !matches!(cli.command, Command::Run(_)) {
+        init_logging(cli.verbose, None);
+    }
     match cli.command {
-        Command::Run(args) => run::run(args),
+        Command::Run(args) => run::run(args, cli.verbose),
         Command::Subscribe(args) => subscribe::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Eval(args) => eval::run(args),

@@ -37,11 +37,12 @@ pub struct RunArgs {
     duration_s: Option<f64>,
 }
 
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
+pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
     let mut config = match &args.config {
         Some(path) => DaemonConfig::load(path)?,
         None => DaemonConfig::default(),
     };
+    super::init_logging(verbose, Some(&config.log.level));
     if !args.sensor.is_empty() {
         config.sensor = args
             .sensor

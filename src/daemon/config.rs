@@ -18,6 +18,7 @@ pub struct DaemonConfig {
     pub track: TrackSection,
     pub mesh: MeshSection,
     pub stats: StatsSection,
+    pub log: LogSection,
 }
 
 impl Default for DaemonConfig {
@@ -29,6 +30,7 @@ impl Default for DaemonConfig {
             track: TrackSection::default(),
             mesh: MeshSection::default(),
             stats: StatsSection::default(),
+            log: LogSection::default(),
         }
     }
 }
@@ -185,6 +187,24 @@ impl Default for StatsSection {
     }
 }
 
+/// Logging to standard error.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogSection {
+    /// What to log: a level (`error`, `warn`, `info`, `debug`, `trace`, `off`) or a
+    /// tracing-subscriber filter such as `"info,tacmesh::daemon=debug"`. `RUST_LOG`, when
+    /// set, and `-v` take precedence. Default `"info"`.
+    pub level: String,
+}
+
+impl Default for LogSection {
+    fn default() -> Self {
+        Self {
+            level: "info".into(),
+        }
+    }
+}
+
 /// A configuration that cannot be used; the daemon stops before it starts anything.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -287,6 +307,13 @@ impl DaemonConfig {
             });
         }
         self.socket_mode()?;
+        if !is_log_filter(&self.log.level) {
+            return Err(ConfigError::OutOfRange {
+                key: "log.level",
+                value: format!("{:?}", self.log.level),
+                expected: "a level (error, warn, info, debug, trace, off) or a filter such as \"info,tacmesh=debug\"",
+            });
+        }
         Ok(())
     }
 
@@ -333,6 +360,19 @@ pub fn default_socket_path() -> PathBuf {
     std::env::temp_dir().join(format!("tacmesh-{user}.sock"))
 }
 
+/// A tracing-subscriber filter whose every directive names a level: `info`, or
+/// `target=level` (a bare target, which tracing would take as "everything from it", is more
+/// likely a typo of a level in a config file).
+fn is_log_filter(text: &str) -> bool {
+    use tracing_subscriber::filter::LevelFilter;
+    let directives_name_levels = text.split(',').all(|directive| {
+        // tracing reads an empty level as "error"; in a config it is a mistake.
+        let level = directive.rsplit('=').next().unwrap_or_default().trim();
+        !level.is_empty() && level.parse::<LevelFilter>().is_ok()
+    });
+    directives_name_levels && tracing_subscriber::EnvFilter::try_new(text).is_ok()
+}
+
 /// The toml crate's message with the line number it points at, in one line.
 fn describe_toml_error(text: &str, err: &toml::de::Error) -> String {
     let message = err.message().trim_end().to_owned();
@@ -375,6 +415,17 @@ mod tests {
         assert!(err.to_string().contains("socket.mode"), "{err}");
         let err = parse("[pipeline]\nring_capacity = 0\n").unwrap_err();
         assert!(err.to_string().contains("ring_capacity"), "{err}");
+        for bad in ["loud", "", "info,tacmesh=loud"] {
+            let err = parse(&format!("[log]\nlevel = {bad:?}\n")).unwrap_err();
+            assert!(err.to_string().contains("log.level"), "{bad}: {err}");
+        }
+        assert_eq!(
+            parse("[log]\nlevel = \"warn,tacmesh::daemon=debug\"\n")
+                .unwrap()
+                .log
+                .level,
+            "warn,tacmesh::daemon=debug"
+        );
     }
 
     #[test]

@@ -12,12 +12,16 @@
 //!                                                   Publisher ─► subscribers
 //! ```
 //!
+//! The calling thread also tells systemd how the daemon is doing and feeds its watchdog from
+//! the pipeline's liveness ([`notify`]).
+//!
 //! Entry points: [`Daemon::start`], [`Daemon::run_until_stopped`], [`StopSignal`].
 
 mod board;
 pub mod config;
 mod counters;
 mod mesher;
+pub mod notify;
 mod perception;
 pub mod planes;
 pub mod sensor;
@@ -38,6 +42,7 @@ use crate::frame_ring::FrameRing;
 use board::Board;
 use counters::Counters;
 use mesher::MeshQueue;
+use notify::{Heartbeat, Heartbeats, Notifier, SystemdFeed};
 use perception::Perception;
 
 /// Why the daemon could not start.
@@ -117,6 +122,10 @@ pub struct Daemon {
     perception: Option<JoinHandle<()>>,
     meshers: Vec<JoinHandle<()>>,
     started: Instant,
+    /// The source threads' heartbeats, for the watchdog.
+    heartbeats: Heartbeats,
+    /// READY=1, STATUS=, WATCHDOG=1 and STOPPING=1 to systemd (a no-op without it).
+    systemd: SystemdFeed,
 }
 
 impl Daemon {
@@ -158,6 +167,8 @@ impl Daemon {
             perception: None,
             meshers: Vec::new(),
             started: Instant::now(),
+            heartbeats: Heartbeats::default(),
+            systemd: SystemdFeed::new(Notifier::from_env(), Instant::now()),
         };
         let spawn = |name: &'static str, body: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
@@ -178,9 +189,12 @@ impl Daemon {
         )?);
         for (spec, section, source) in sensors {
             let s = Arc::clone(&shared);
+            let heartbeat = daemon
+                .heartbeats
+                .register(&format!("source ({})", section.spec));
             daemon.sources.push(spawn(
                 "source",
-                Box::new(move || read_source(&s, &spec, &section, source)),
+                Box::new(move || read_source(&s, &spec, &section, source, heartbeat)),
             )?);
         }
         Ok(daemon)
@@ -199,12 +213,41 @@ impl Daemon {
     }
 
     /// Sends stats and logs counters periodically until `stop` is requested, then shuts down.
-    pub fn run_until_stopped(self, stop: &StopSignal) -> CounterSnapshot {
+    /// Tells systemd READY=1 once a source thread runs (the socket is bound by then), then
+    /// keeps STATUS= fresh and feeds the watchdog while the pipeline is alive.
+    pub fn run_until_stopped(mut self, stop: &StopSignal) -> CounterSnapshot {
         let stats_every = Duration::from_secs_f32(self.shared.config.stats.publish_interval_s);
         let log_every = Duration::from_secs_f32(self.shared.config.stats.log_interval_s);
         let mut next_log = Instant::now() + log_every;
         let mut said_ended = false;
-        while !stop.wait_timeout(stats_every) {
+        // The sensors opened and the socket was bound in `start`; ready once a source thread
+        // has begun reading (it beats first thing, so this is a moment).
+        while !self.heartbeats.any_beaten() && !self.sources.iter().all(|s| s.is_finished()) {
+            if stop.wait_timeout(Duration::from_millis(5)) {
+                return self.shutdown();
+            }
+        }
+        self.systemd.notifier().ready(&format!(
+            "serving meshes on {}",
+            self.shared.publisher.socket_path().display()
+        ));
+        let mut next_stats = Instant::now() + stats_every;
+        loop {
+            let wake = next_stats.min(self.systemd.next_due());
+            if stop.wait_timeout(wake.saturating_duration_since(Instant::now())) {
+                break;
+            }
+            let now = Instant::now();
+            if now >= self.systemd.next_due() {
+                let snapshot = self.counters();
+                let mesh_jobs_waiting = self.shared.mesh_queue.len();
+                self.systemd
+                    .tick(now, &self.heartbeats, &snapshot, mesh_jobs_waiting);
+            }
+            if now < next_stats {
+                continue;
+            }
+            next_stats = now + stats_every;
             let snapshot = self.counters();
             if let Err(err) = self.shared.publisher.stats(snapshot.to_stats()) {
                 tracing::warn!("stats not sent: {err}");
@@ -232,6 +275,7 @@ impl Daemon {
     /// subscribers and removes the socket.
     pub fn shutdown(mut self) -> CounterSnapshot {
         let begun = Instant::now();
+        self.systemd.notifier().stopping();
         tracing::info!("stopping");
         self.shared.source_stop.store(true, Ordering::Relaxed);
         self.shared.ring.close();
@@ -285,6 +329,7 @@ fn read_source(
     spec: &SensorSpec,
     section: &config::SensorSection,
     source: Box<dyn DepthSource>,
+    heartbeat: Heartbeat,
 ) {
     let supervised = Supervised {
         label: section.spec.clone(),
@@ -295,8 +340,12 @@ fn read_source(
             .map(config::PoseSection::world_from_sensor),
         reopen: Box::new(|| spec.open(section)),
         first_backoff: Duration::from_millis(100),
+        heartbeat,
     };
     supervise(shared, &supervised, source);
+    // Ended normally (stopped, or a recording at its end): no longer watched. A panic skips
+    // this, and the silent heartbeat stops the watchdog pings.
+    supervised.heartbeat.retire();
 }
 
 /// How one sensor is supervised.
@@ -309,6 +358,9 @@ struct Supervised<'a> {
     reopen: Box<dyn Fn() -> Result<Box<dyn DepthSource>, SensorError> + Send + 'a>,
     /// The first wait before reopening; it doubles up to 5 s.
     first_backoff: Duration,
+    /// Beaten on every turn of the supervisor loop and while it waits (to reopen a lost device,
+    /// or for room in the ring): only a thread stuck in one call falls silent (see [`notify`]).
+    heartbeat: Heartbeat,
 }
 
 fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn DepthSource>) {
@@ -318,10 +370,13 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn Depth
     let mut backoff = first_backoff;
     let mut in_burst = false;
     let stopped = || shared.source_stop.load(Ordering::Relaxed);
-    // Sleeps up to `pause`, waking early on stop; true when stopped.
+    let beat = || sensor.heartbeat.beat();
+    // Sleeps up to `pause`, waking early on stop; true when stopped. Beats while it waits: a
+    // device being reopened with backoff is not a stall.
     let pause = |pause: Duration| {
         let until = Instant::now() + pause;
         while Instant::now() < until {
+            beat();
             if stopped() {
                 return true;
             }
@@ -330,6 +385,7 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn Depth
         stopped()
     };
     while !stopped() {
+        beat();
         match source.next_observation() {
             Ok(mut observation) => {
                 if in_burst {
@@ -341,7 +397,12 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn Depth
                     place(&mut observation, rig);
                 }
                 if sensor.recording {
-                    shared.ring.push_wait(observation, stopped);
+                    // Waiting for room is not a stall of this thread (a stuck perception
+                    // thread shows as its own stall).
+                    shared.ring.push_wait(observation, || {
+                        beat();
+                        stopped()
+                    });
                 } else {
                     shared.ring.push(observation);
                 }
@@ -460,6 +521,7 @@ mod tests {
                 }
             }),
             first_backoff: Duration::from_millis(1),
+            heartbeat: Heartbeats::default().register("test"),
         };
         let first = Scripted(VecDeque::from([
             cloud(),
@@ -489,6 +551,50 @@ mod tests {
         shared.publisher.shutdown("test over");
     }
 
+    /// A sensor that is gone and being reopened with backoff is not a stall: the supervisor
+    /// beats its heartbeat while it waits, so the watchdog stays fed.
+    #[test]
+    fn supervisor_beats_while_waiting_to_reopen() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = shared(dir.path());
+        let heartbeats = Heartbeats::default();
+        let heartbeat = heartbeats.register("source (gone)");
+        let sensor = Supervised {
+            label: "gone".into(),
+            recording: false,
+            world_from_rig: None,
+            reopen: Box::new(|| {
+                Err(SensorError::Unknown {
+                    spec: "gone".into(),
+                })
+            }),
+            // Backoff far longer than the staleness limit below.
+            first_backoff: Duration::from_secs(2),
+            heartbeat: heartbeat.clone(),
+        };
+        let gone = Scripted(VecDeque::from([Err(SourceError::Disconnected {
+            device: "gone".into(),
+            reason: "unplugged".into(),
+        })]));
+        let limit = Duration::from_millis(200);
+        std::thread::scope(|scope| {
+            let shared = &shared;
+            let worker = scope.spawn(move || supervise(shared, &sensor, Box::new(gone)));
+            for _ in 0..10 {
+                std::thread::sleep(Duration::from_millis(50));
+                assert_eq!(heartbeats.stalled(Instant::now(), limit), None);
+            }
+            shared.source_stop.store(true, Ordering::Relaxed);
+            worker.join().unwrap();
+        });
+        // A thread that stopped beating is stale, unless it retired.
+        let later = Instant::now() + limit * 2;
+        assert!(heartbeats.stalled(later, limit).is_some());
+        heartbeat.retire();
+        assert_eq!(heartbeats.stalled(later, limit), None);
+        shared.publisher.shutdown("test over");
+    }
+
     /// A stop request ends the thread while it waits to reopen a device.
     #[test]
     fn supervisor_stops_while_waiting_to_reopen() {
@@ -504,6 +610,7 @@ mod tests {
                 })
             }),
             first_backoff: Duration::from_millis(10),
+            heartbeat: Heartbeats::default().register("test"),
         };
         let gone = Scripted(VecDeque::from([Err(SourceError::DeviceMissing {
             device: "gone".into(),
