@@ -838,3 +838,45 @@ fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
     // asserted is 5 s: a queue that grows without bound would pass it within seconds.
     assert!(p99 < 5000.0, "p99 data age {p99} ms");
 }
+
+/// `socket.allow_users`: a process whose user is not listed is cut off before Hello, and the
+/// refusal is logged; a listed user subscribes as usual.
+#[test]
+fn only_the_allowed_users_may_subscribe() {
+    use std::os::unix::fs::MetadataExt;
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    // Our own uid, as the kernel reports it for our connections: the owner of a file we made.
+    let probe = dir.path().join("probe");
+    std::fs::write(&probe, b"").expect("writes");
+    let uid = std::fs::metadata(&probe).expect("stat").uid();
+    for (allowed, admitted) in [(uid.wrapping_add(1), false), (uid, true)] {
+        let config = dir.path().join(format!("allow-{allowed}.toml"));
+        std::fs::write(&config, format!("[socket]\nallow_users = [{allowed}]\n"))
+            .expect("writes the config");
+        let socket = dir.path().join(format!("allow-{allowed}.sock"));
+        let run = Run::start(&["--config", path_str(&config)], &socket);
+        if admitted {
+            let mut subscription = run.subscribe();
+            let until = Instant::now() + Duration::from_secs(30);
+            loop {
+                match subscription.next_message() {
+                    Ok(Message::Upsert(_)) => break,
+                    Ok(_) => {}
+                    Err(err) => panic!("the allowed user lost its subscription: {err}"),
+                }
+                assert!(Instant::now() < until, "no update for the allowed user");
+            }
+        } else {
+            let stream = UnixStream::connect(&socket).expect("connects");
+            assert_cut_off(stream, "not allowed", Duration::from_secs(10));
+            assert!(
+                run.wait_for_log("refused a subscriber", 1, Duration::from_secs(10)),
+                "{}",
+                run.log()
+            );
+        }
+    }
+}

@@ -2,8 +2,10 @@
 //! line), every key optional with the default documented beside it. `tacmesh.example.toml` at
 //! the repository root lists them all.
 
+use super::access::{allowed_peers, group_id, AccessError, Principal};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use tacmesh_publish::AllowedPeers;
 
 use serde::Deserialize;
 
@@ -93,6 +95,15 @@ pub struct SocketSection {
     pub path: Option<PathBuf>,
     /// Permission bits of the socket file, as an octal string. Default `"0660"`.
     pub mode: Option<String>,
+    /// Group (a name or a number) to give the socket file, so that its members may connect
+    /// with mode 0660. Default: the daemon's own group.
+    pub group: Option<Principal>,
+    /// If set (or `allow_groups` is), only processes running as one of these users (names or
+    /// numbers) may subscribe, checked with the kernel's `SO_PEERCRED`; others are cut off
+    /// before Hello and counted. Default: whoever the file mode lets connect.
+    pub allow_users: Option<Vec<Principal>>,
+    /// As `allow_users`, by the connecting process's primary group.
+    pub allow_groups: Option<Vec<Principal>>,
 }
 
 /// The per-frame stages.
@@ -221,6 +232,8 @@ pub enum ConfigError {
         value: String,
         expected: &'static str,
     },
+    #[error(transparent)]
+    Access(#[from] AccessError),
 }
 
 impl DaemonConfig {
@@ -307,6 +320,7 @@ impl DaemonConfig {
             });
         }
         self.socket_mode()?;
+        self.socket_access()?;
         if !is_log_filter(&self.log.level) {
             return Err(ConfigError::OutOfRange {
                 key: "log.level",
@@ -331,6 +345,21 @@ impl DaemonConfig {
                 expected: "an octal permission string such as \"0660\"",
             }),
         }
+    }
+
+    /// The socket file's group and the peers allowed to subscribe, names resolved to ids.
+    pub fn socket_access(&self) -> Result<(Option<u32>, Option<AllowedPeers>), ConfigError> {
+        let group = self
+            .socket
+            .group
+            .as_ref()
+            .map(|g| group_id(g, "socket.group"))
+            .transpose()?;
+        let peers = allowed_peers(
+            self.socket.allow_users.as_deref(),
+            self.socket.allow_groups.as_deref(),
+        )?;
+        Ok((group, peers))
     }
 
     /// The socket path: `socket.path`, else the default (see [`default_socket_path`]).
@@ -443,6 +472,28 @@ mod tests {
         assert!(p.abs_diff_eq(glam::Vec3::new(1.0, 1.0, 0.5), 1e-6), "{p}");
         let err = parse("[[sensor]]\nspec = \"sim\"\nposition = [1, 2, 3]\n").unwrap_err();
         assert!(err.to_string().contains("position"), "{err}");
+    }
+
+    #[test]
+    fn socket_access_names_resolve_at_load() {
+        let config = parse(
+            "[socket]\ngroup = \"root\"\nallow_users = [\"root\", 1001]\nallow_groups = [0]\n",
+        )
+        .unwrap();
+        let (group, peers) = config.socket_access().unwrap();
+        assert_eq!(group, Some(0));
+        let peers = peers.expect("allow lists given");
+        assert_eq!((peers.uids, peers.gids), (vec![0, 1001], vec![0]));
+        assert_eq!(
+            DaemonConfig::default().socket_access().unwrap(),
+            (None, None)
+        );
+        let err = parse("[socket]\nallow_users = [\"no-such-user-for-tacmesh\"]\n").unwrap_err();
+        assert!(
+            err.to_string().contains("socket.allow_users")
+                && err.to_string().contains("no-such-user-for-tacmesh"),
+            "{err}"
+        );
     }
 
     #[test]

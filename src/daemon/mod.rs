@@ -17,6 +17,7 @@
 //!
 //! Entry points: [`Daemon::start`], [`Daemon::run_until_stopped`], [`StopSignal`].
 
+pub mod access;
 mod board;
 pub mod config;
 mod counters;
@@ -135,18 +136,33 @@ impl Daemon {
     pub fn start(config: DaemonConfig) -> Result<Daemon, DaemonError> {
         config.validate()?;
         let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))?;
-        // Every sensor opens before anything starts: a missing device fails the start.
+        // Every sensor is opened before anything starts, so that a wrong spec, a missing file or
+        // a backend not built fails the start. A device that is not there (yet) does not: the
+        // daemon serves without it and its supervisor keeps trying to open it, with backoff.
         let mut sensors = Vec::with_capacity(config.sensor.len());
         for section in &config.sensor {
             let spec = SensorSpec::parse(&section.spec).map_err(Box::new)?;
-            let source = spec.open(section).map_err(Box::new)?;
+            let source = match spec.open(section) {
+                Ok(source) => Some(source),
+                Err(err) if err.is_device_absent() => {
+                    tracing::warn!(
+                        "{}: {err}; serving without it and trying again with backoff",
+                        section.spec
+                    );
+                    None
+                }
+                Err(err) => return Err(Box::new(err).into()),
+            };
             sensors.push((spec, section.clone(), source));
         }
         let mut publisher_config = PublisherConfig::new(config.socket_path());
         publisher_config.mode = config.socket_mode()?;
+        (publisher_config.group, publisher_config.allowed_peers) = config.socket_access()?;
         let publisher = Publisher::bind(publisher_config)?;
         for (_, _, source) in &sensors {
-            tracing::info!("reading {}", source.name());
+            if let Some(source) = source {
+                tracing::info!("reading {}", source.name());
+            }
         }
         tracing::info!(
             "subscribe with: tacmesh subscribe --socket {}",
@@ -328,7 +344,7 @@ fn read_source(
     shared: &Shared,
     spec: &SensorSpec,
     section: &config::SensorSection,
-    source: Box<dyn DepthSource>,
+    source: Option<Box<dyn DepthSource>>,
     heartbeat: Heartbeat,
 ) {
     let supervised = Supervised {
@@ -363,7 +379,9 @@ struct Supervised<'a> {
     heartbeat: Heartbeat,
 }
 
-fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn DepthSource>) {
+/// Reads `source` (or, if it is `None` because the device was absent at start, first opens it
+/// with backoff) into the ring until stopped or the recording ends.
+fn supervise(shared: &Shared, sensor: &Supervised<'_>, source: Option<Box<dyn DepthSource>>) {
     const MAX_BACKOFF: Duration = Duration::from_secs(5);
     let first_backoff = sensor.first_backoff;
     let rig = sensor.world_from_rig;
@@ -383,6 +401,39 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn Depth
             std::thread::sleep(Duration::from_millis(20).min(pause));
         }
         stopped()
+    };
+    // Waits, reopens, and again with a doubled wait, until the sensor opens; None once stopped.
+    // Failed attempts are logged at the 1st, 2nd, 4th, 8th… so that a sensor left unplugged
+    // for hours does not fill the journal (at most every 5 s, that is about 12 a minute).
+    let reopen = |backoff: &mut Duration| -> Option<Box<dyn DepthSource>> {
+        let mut attempts = 0u64;
+        loop {
+            if pause(*backoff) {
+                return None;
+            }
+            *backoff = (*backoff * 2).min(MAX_BACKOFF);
+            Counters::add(&shared.counters.source_restarts, 1);
+            attempts += 1;
+            match (sensor.reopen)() {
+                Ok(reopened) => {
+                    tracing::info!("{}: reopened", reopened.name());
+                    return Some(reopened);
+                }
+                Err(err) if attempts.is_power_of_two() => tracing::warn!(
+                    "{}: {err}; retrying every {backoff:?} ({attempts} attempts so far, logged \
+                     at powers of two)",
+                    sensor.label
+                ),
+                Err(err) => tracing::debug!("{}: {err}; retrying in {backoff:?}", sensor.label),
+            }
+        }
+    };
+    let mut source = match source {
+        Some(source) => source,
+        None => match reopen(&mut backoff) {
+            Some(source) => source,
+            None => return,
+        },
     };
     while !stopped() {
         beat();
@@ -422,22 +473,9 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, mut source: Box<dyn Depth
                 Counters::add(&shared.counters.source_errors, 1);
                 tracing::warn!("{}: {err}; reopening in {backoff:?}", source.name());
                 in_burst = true;
-                loop {
-                    if pause(backoff) {
-                        return;
-                    }
-                    backoff = (backoff * 2).min(MAX_BACKOFF);
-                    Counters::add(&shared.counters.source_restarts, 1);
-                    match (sensor.reopen)() {
-                        Ok(reopened) => {
-                            tracing::info!("{}: reopened", reopened.name());
-                            source = reopened;
-                            break;
-                        }
-                        Err(err) => {
-                            tracing::warn!("{}: {err}; retrying in {backoff:?}", sensor.label)
-                        }
-                    }
+                match reopen(&mut backoff) {
+                    Some(reopened) => source = reopened,
+                    None => return,
                 }
             }
         }
@@ -535,7 +573,7 @@ mod tests {
                 reason: "unplugged".into(),
             }),
         ]));
-        supervise(&shared, &sensor, Box::new(first));
+        supervise(&shared, &sensor, Some(Box::new(first)));
         assert_eq!(attempts.load(Ordering::SeqCst), 2);
         let load = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
         assert_eq!(load(&shared.counters.source_errors), 2);
@@ -579,7 +617,7 @@ mod tests {
         let limit = Duration::from_millis(200);
         std::thread::scope(|scope| {
             let shared = &shared;
-            let worker = scope.spawn(move || supervise(shared, &sensor, Box::new(gone)));
+            let worker = scope.spawn(move || supervise(shared, &sensor, Some(Box::new(gone))));
             for _ in 0..10 {
                 std::thread::sleep(Duration::from_millis(50));
                 assert_eq!(heartbeats.stalled(Instant::now(), limit), None);
@@ -619,12 +657,52 @@ mod tests {
         let stop = &shared.source_stop;
         std::thread::scope(|scope| {
             let shared = &shared;
-            let worker = scope.spawn(move || supervise(shared, &sensor, Box::new(gone)));
+            let worker = scope.spawn(move || supervise(shared, &sensor, Some(Box::new(gone))));
             std::thread::sleep(Duration::from_millis(100));
             stop.store(true, Ordering::Relaxed);
             worker.join().unwrap();
         });
         assert!(shared.counters.source_restarts.load(Ordering::Relaxed) >= 1);
+        shared.publisher.shutdown("test over");
+    }
+
+    /// A device absent at start is opened once it appears, and its frames flow.
+    #[test]
+    fn supervisor_opens_a_device_that_was_absent_at_start() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = shared(dir.path());
+        let attempts = AtomicUsize::new(0);
+        let sensor = Supervised {
+            label: "late".into(),
+            recording: true,
+            world_from_rig: None,
+            reopen: Box::new(|| {
+                // Absent for the first two attempts, then plugged in.
+                if attempts.fetch_add(1, Ordering::SeqCst) < 2 {
+                    return Err(SensorError::Device(SourceError::DeviceMissing {
+                        device: "late".into(),
+                        hint: "not plugged in yet".into(),
+                    }));
+                }
+                Ok(Box::new(Scripted(VecDeque::from([cloud(), cloud()]))))
+            }),
+            first_backoff: Duration::from_millis(5),
+            heartbeat: Heartbeats::default().register("test"),
+        };
+        std::thread::scope(|scope| {
+            let shared = &shared;
+            let worker = scope.spawn(move || supervise(shared, &sensor, None));
+            // The recording pushes without loss: take both frames out of the ring.
+            for _ in 0..2 {
+                assert!(matches!(
+                    shared.ring.pop_timeout(Duration::from_secs(5)),
+                    crate::frame_ring::Pop::Item(_)
+                ));
+            }
+            worker.join().unwrap();
+        });
+        assert_eq!(attempts.load(Ordering::SeqCst), 3);
+        assert_eq!(shared.counters.source_restarts.load(Ordering::Relaxed), 3);
         shared.publisher.shutdown("test over");
     }
 }

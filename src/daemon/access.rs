@@ -1,0 +1,132 @@
+//! Who may subscribe: the group given to the socket file and the optional allow lists of
+//! users and groups checked against each peer's credentials (`SO_PEERCRED`), with names
+//! resolved to ids once, at start, so that a name that does not exist fails the start instead
+//! of locking everyone out later.
+
+use serde::Deserialize;
+use tacmesh_publish::AllowedPeers;
+
+/// A user or group in the config: a name (`"robot"`) or a number (`1000`).
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(untagged)]
+pub enum Principal {
+    Id(u32),
+    Name(String),
+}
+
+/// Why a user or group named in the config cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum AccessError {
+    #[error("config: {key}: there is no {kind} {name:?} on this system")]
+    Unknown {
+        key: &'static str,
+        kind: &'static str,
+        name: String,
+    },
+    #[error("config: {key}: cannot look up the {kind} {name:?}: {source}")]
+    Lookup {
+        key: &'static str,
+        kind: &'static str,
+        name: String,
+        source: nix::Error,
+    },
+}
+
+/// The group id of `principal` (a name is looked up through NSS, as `getent group` would).
+pub fn group_id(principal: &Principal, key: &'static str) -> Result<u32, AccessError> {
+    match principal {
+        Principal::Id(id) => Ok(*id),
+        Principal::Name(name) => nix::unistd::Group::from_name(name)
+            .map_err(|source| AccessError::Lookup {
+                key,
+                kind: "group",
+                name: name.clone(),
+                source,
+            })?
+            .map(|group| group.gid.as_raw())
+            .ok_or_else(|| AccessError::Unknown {
+                key,
+                kind: "group",
+                name: name.clone(),
+            }),
+    }
+}
+
+/// The user id of `principal` (a name is looked up through NSS, as `getent passwd` would).
+pub fn user_id(principal: &Principal, key: &'static str) -> Result<u32, AccessError> {
+    match principal {
+        Principal::Id(id) => Ok(*id),
+        Principal::Name(name) => nix::unistd::User::from_name(name)
+            .map_err(|source| AccessError::Lookup {
+                key,
+                kind: "user",
+                name: name.clone(),
+                source,
+            })?
+            .map(|user| user.uid.as_raw())
+            .ok_or_else(|| AccessError::Unknown {
+                key,
+                kind: "user",
+                name: name.clone(),
+            }),
+    }
+}
+
+/// The allow lists, resolved; `None` when neither list is given (anyone the socket file's
+/// mode lets connect may subscribe). An empty list given on purpose admits nobody by it.
+pub fn allowed_peers(
+    users: Option<&[Principal]>,
+    groups: Option<&[Principal]>,
+) -> Result<Option<AllowedPeers>, AccessError> {
+    if users.is_none() && groups.is_none() {
+        return Ok(None);
+    }
+    let uids = users
+        .unwrap_or_default()
+        .iter()
+        .map(|p| user_id(p, "socket.allow_users"))
+        .collect::<Result<_, _>>()?;
+    let gids = groups
+        .unwrap_or_default()
+        .iter()
+        .map(|p| group_id(p, "socket.allow_groups"))
+        .collect::<Result<_, _>>()?;
+    Ok(Some(AllowedPeers { uids, gids }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_and_numbers_resolve() {
+        // root is user 0 and group 0 on every Linux system.
+        let root = Principal::Name("root".into());
+        assert_eq!(user_id(&root, "k").unwrap(), 0);
+        assert_eq!(group_id(&root, "k").unwrap(), 0);
+        assert_eq!(user_id(&Principal::Id(1234), "k").unwrap(), 1234);
+        let peers = allowed_peers(Some(&[root.clone(), Principal::Id(7)]), None)
+            .unwrap()
+            .unwrap();
+        assert_eq!(peers.uids, vec![0, 7]);
+        assert!(peers.gids.is_empty());
+        assert_eq!(allowed_peers(None, None).unwrap(), None);
+    }
+
+    #[test]
+    fn an_unknown_name_is_an_error_naming_it_and_the_key() {
+        let ghost = Principal::Name("no-such-tacmesh-user-xyz".into());
+        let err = allowed_peers(Some(&[ghost]), None).unwrap_err().to_string();
+        assert!(
+            err.contains("socket.allow_users") && err.contains("no-such-tacmesh-user-xyz"),
+            "{err}"
+        );
+        let err = group_id(&Principal::Name("no-such-group-xyz".into()), "socket.group")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("socket.group") && err.contains("group"),
+            "{err}"
+        );
+    }
+}
