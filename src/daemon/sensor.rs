@@ -161,6 +161,19 @@ pub enum SensorError {
     DepthAi(#[from] tacmesh_depthai::DepthAiError),
 }
 
+impl SensorError {
+    /// Whether the sensor is simply not there (unplugged, not yet enumerated, no camera on the
+    /// bus), as opposed to a wrong spec, a missing file or a backend not built: the daemon
+    /// starts without an absent device and keeps trying to open it.
+    pub fn is_device_absent(&self) -> bool {
+        matches!(
+            self,
+            SensorError::Device(tacmesh_source::SourceError::DeviceMissing { .. })
+                | SensorError::DepthAi(tacmesh_depthai::DepthAiError::NoDevice { .. })
+        )
+    }
+}
+
 impl SensorSpec {
     /// Whether the source is a recording: read without losing frames (the reader waits for
     /// the pipeline) rather than dropping the oldest like a live sensor.
