@@ -36,11 +36,7 @@ pub fn start_daemon(sensor: &str, extra: &[&str]) -> RunningDaemon {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    RunningDaemon {
-        child,
-        socket,
-        dir,
-    }
+    RunningDaemon { child, socket, dir }
 }
 
 /// A `kB` field of /proc/PID/status (`VmRSS`, `VmHWM`…) in KiB; `None` once the process is

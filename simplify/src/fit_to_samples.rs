@@ -389,7 +389,11 @@ mod tests {
             .map(|&point| WeightedSample { point, weight: 1.0 })
             .collect();
         let grid = TriangleGrid::new(&mesh, &samples, 0.0025);
-        assert!(grid.cells.len() <= samples.len(), "{} cells", grid.cells.len());
+        assert!(
+            grid.cells.len() <= samples.len(),
+            "{} cells",
+            grid.cells.len()
+        );
         assert!(grid.cells.values().all(|triangles| !triangles.is_empty()));
         let report = fit_to_samples(
             &mut mesh,
