@@ -81,23 +81,7 @@ impl Daemon {
 
     /// Sends SIGTERM; returns the exit status and how long the exit took.
     fn terminate(&mut self) -> (std::process::ExitStatus, Duration) {
-        let sent = Instant::now();
-        let kill = Command::new("kill")
-            .args(["-TERM", &self.child.id().to_string()])
-            .status()
-            .expect("kill runs");
-        assert!(kill.success());
-        loop {
-            if let Some(status) = self.child.try_wait().expect("waits") {
-                return (status, sent.elapsed());
-            }
-            // Generous: a hang is the failure this catches, not a slow machine.
-            assert!(
-                sent.elapsed() < Duration::from_secs(10),
-                "no exit after SIGTERM"
-            );
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        crate::util::terminate(&mut self.child, Duration::from_secs(10))
     }
 }
 

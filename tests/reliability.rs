@@ -122,23 +122,7 @@ impl Run {
 
     /// Sends SIGTERM; returns the exit status and how long the exit took.
     fn terminate(&mut self) -> (ExitStatus, Duration) {
-        let sent = Instant::now();
-        let kill = Command::new("kill")
-            .args(["-TERM", &self.child.id().to_string()])
-            .status()
-            .expect("kill runs");
-        assert!(kill.success());
-        loop {
-            if let Some(status) = self.child.try_wait().expect("waits") {
-                return (status, sent.elapsed());
-            }
-            // A hang guard, not a performance bound.
-            assert!(
-                sent.elapsed() < Duration::from_secs(15),
-                "no exit after SIGTERM"
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        crate::util::terminate(&mut self.child, Duration::from_secs(15))
     }
 
     /// The counter `name` (e.g. `"source errors "`, `"(restarts "`) from the last counters log

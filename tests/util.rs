@@ -39,3 +39,24 @@ pub fn shared_data(relative: &str) -> PathBuf {
 pub fn path_str(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
 }
+
+/// Sends SIGTERM to `child` and waits for it to exit; returns the exit status and how long the
+/// exit took. Fails after `hang_guard`: a guard against a hang, not a performance bound.
+pub fn terminate(
+    child: &mut std::process::Child,
+    hang_guard: std::time::Duration,
+) -> (std::process::ExitStatus, std::time::Duration) {
+    let sent = std::time::Instant::now();
+    let kill = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(kill.success());
+    loop {
+        if let Some(status) = child.try_wait().expect("waits") {
+            return (status, sent.elapsed());
+        }
+        assert!(sent.elapsed() < hang_guard, "no exit after SIGTERM");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}

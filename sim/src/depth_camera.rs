@@ -755,13 +755,7 @@ impl DepthSource for SimulatedDepthCamera {
 
 pub(crate) fn check_config(config: &DepthCameraConfig) -> Result<(), DepthCameraError> {
     let k = config.intrinsics;
-    let focal_ok = |f: f32| f.is_finite() && f != 0.0;
-    if k.width == 0
-        || k.height == 0
-        || !focal_ok(k.fx)
-        || !focal_ok(k.fy)
-        || !(k.cx.is_finite() && k.cy.is_finite())
-    {
+    if !k.is_usable() {
         return Err(DepthCameraError::InvalidIntrinsics { intrinsics: k });
     }
     let pose = config.world_from_sensor;

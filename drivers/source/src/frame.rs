@@ -14,6 +14,18 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
+    /// Whether these can deproject anything: a non-zero size, finite non-zero focal lengths and
+    /// a finite principal point.
+    pub fn is_usable(&self) -> bool {
+        let focal_ok = |f: f32| f.is_finite() && f != 0.0;
+        self.width != 0
+            && self.height != 0
+            && focal_ok(self.fx)
+            && focal_ok(self.fy)
+            && self.cx.is_finite()
+            && self.cy.is_finite()
+    }
+
     /// The ray direction (z = 1) through pixel centre `(u, v)` in the sensor frame
     /// (x right, y down, z forward).
     pub fn ray(&self, u: f32, v: f32) -> Vec3 {
@@ -67,13 +79,7 @@ impl DepthFrame {
     /// without a single pixel counted as invalid, or to points at the wrong pixels.
     pub fn check(&self) -> Result<(), FrameError> {
         let k = self.intrinsics;
-        let focal_ok = |f: f32| f.is_finite() && f != 0.0;
-        if k.width == 0
-            || k.height == 0
-            || !focal_ok(k.fx)
-            || !focal_ok(k.fy)
-            || !(k.cx.is_finite() && k.cy.is_finite())
-        {
+        if !k.is_usable() {
             return Err(FrameError::BadIntrinsics { intrinsics: k });
         }
         if !self.is_consistent() {
