@@ -33,6 +33,8 @@
 //! `ReplayMessage`, MCAP files): `record=FILE.mcap` records a live camera's depth, and a spec
 //! naming an `.mcap` file plays it back, with the intrinsics each frame carries.
 
+#![forbid(unsafe_code)]
+
 mod error;
 mod frame;
 #[cfg(feature = "device")]
