@@ -61,22 +61,7 @@ fn receive(manager: &UnixDatagram, until: Instant, stop_at: impl Fn(&str) -> boo
 
 /// `kill -TERM`, then the exit status (within 10 s).
 fn terminate(child: &mut Child) -> std::process::ExitStatus {
-    let kill = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(kill.success());
-    let sent = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().expect("waits") {
-            return status;
-        }
-        assert!(
-            sent.elapsed() < Duration::from_secs(10),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    crate::util::terminate(child, Duration::from_secs(10)).0
 }
 
 fn notify_socket(dir: &Path) -> UnixDatagram {
