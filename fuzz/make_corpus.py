@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Builds the seed corpora of the fuzz targets, one directory per target, from the real files in
-the shared test data (see its SOURCES.md) and from small hand-built inputs.
+the repository's test data (testdata/, see its SOURCES.md) and from small hand-built inputs.
 
-    python3 fuzz/make_corpus.py [--data ../shared/data] [--out fuzz/corpus]
+    python3 fuzz/make_corpus.py [--data testdata] [--out fuzz/corpus]
 
 Real files over a few hundred kilobytes are not copied whole (libFuzzer would then mutate
 megabyte inputs at a few executions a second); they are cut down to a valid file of the same
@@ -19,7 +19,7 @@ import struct
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-DEFAULT_DATA = HERE.parent.parent / "shared" / "data"
+DEFAULT_DATA = HERE.parent / "testdata"
 
 
 def main():
@@ -29,7 +29,7 @@ def main():
     args = parser.parse_args()
     data = args.data
     if not (data / "SOURCES.md").is_file():
-        raise SystemExit(f"{data} is not the shared test data (no SOURCES.md); pass --data")
+        raise SystemExit(f"{data} is not the test data (no SOURCES.md); pass --data")
     seeds = {
         "wire": wire_seeds(),
         "ply": ply_seeds(data),

@@ -1,6 +1,6 @@
-//! Real sensor data from `../shared/data` (see its SOURCES.md) through the CLI.
+//! Real sensor data from `testdata/` (see its SOURCES.md) through the CLI.
 
-use crate::util::{path_str, shared_data, tacmesh_json};
+use crate::util::{path_str, tacmesh_json, test_data};
 
 /// One Cyberware range scan of the Stanford bunny (bun000, already in the reference frame per
 /// bun.conf) meshed with the defaults lies on the zippered reconstruction of all ten scans.
@@ -10,8 +10,8 @@ use crate::util::{path_str, shared_data, tacmesh_json};
 fn bunny_range_scan_lies_on_the_reference_surface() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mesh = dir.path().join("bunny.ply");
-    let scan = shared_data("pointclouds/stanford_bunny/bun000.ply");
-    let reference = shared_data("pointclouds/stanford_bunny/bun_zipper_res2.ply");
+    let scan = test_data("pointclouds/stanford_bunny/bun000.ply");
+    let reference = test_data("pointclouds/stanford_bunny/bun_zipper_res2.ply");
     let report = tacmesh_json(&["mesh", path_str(&scan), "-o", path_str(&mesh), "--json"]);
     let faces = report["faces"].as_u64().expect("faces");
     assert!((20..400).contains(&faces), "bunny faces {faces}");
@@ -31,7 +31,7 @@ fn bunny_range_scan_lies_on_the_reference_surface() {
 fn milk_carton_scan_meshes_small() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mesh = dir.path().join("milk.obj");
-    let scan = shared_data("pointclouds/pcl/milk.pcd");
+    let scan = test_data("pointclouds/pcl/milk.pcd");
     let report = tacmesh_json(&["mesh", path_str(&scan), "-o", path_str(&mesh), "--json"]);
     let faces = report["faces"].as_u64().expect("faces");
     assert!((4..200).contains(&faces), "milk carton faces {faces}");
@@ -46,7 +46,7 @@ fn kinect_frame_deprojects_like_pcl() {
     use tacmesh::glam::{Affine3A, Vec3};
     use tacmesh::source::{DepthFrame, Intrinsics};
 
-    let pcd = tacmesh::formats::pcd::read_pcd(&shared_data(
+    let pcd = tacmesh::formats::pcd::read_pcd(&test_data(
         "depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd",
     ))
     .expect("the grabber's PCD reads");
@@ -86,7 +86,7 @@ fn mesh_objects(scene: &str) -> (tempfile::TempDir, serde_json::Value) {
     let out = dir.path().join("objects");
     let report = tacmesh_json(&[
         "mesh",
-        path_str(&shared_data(scene)),
+        path_str(&test_data(scene)),
         "--objects",
         "-o",
         path_str(&out),
@@ -114,7 +114,7 @@ fn mosd_scenes_segment_into_their_labelled_objects() {
         ("pointclouds/mosd/osd_test35.pcd", 4),
     ] {
         let (dir, report) = mesh_objects(scene);
-        let truth = tacmesh::formats::pcd::read_pcd(&shared_data(scene))
+        let truth = tacmesh::formats::pcd::read_pcd(&test_data(scene))
             .expect("the scan reads")
             .labels
             .expect("mOSD scans carry labels");
@@ -164,7 +164,7 @@ fn mug_scene_yields_an_open_mug_mesh_with_no_closing_residue() {
         objects[0]["file"].as_str().expect("file"),
     ))
     .expect("mesh");
-    let cloud = tacmesh::formats::read_cloud_in_file_order(&shared_data(scene)).expect("scene");
+    let cloud = tacmesh::formats::read_cloud_in_file_order(&test_data(scene)).expect("scene");
     let mug: Vec<_> = labels(&dir)
         .iter()
         .zip(&cloud.points)

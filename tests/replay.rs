@@ -2,7 +2,6 @@
 //! replay:…` into published object meshes (looped, so that objects are seen in enough frames
 //! to be confirmed; the bag holds only two depth frames).
 
-use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -10,7 +9,7 @@ use tacmesh::protocol::Message;
 use tacmesh::subscriber::Subscription;
 
 use crate::daemon::ONE_DAEMON_AT_A_TIME;
-use crate::util::shared_data;
+use crate::util::test_data;
 
 /// Runs the daemon on `spec` until a subscriber has an object mesh; returns its face count.
 fn first_object_mesh(spec: &str) -> usize {
@@ -58,9 +57,7 @@ fn first_object_mesh(spec: &str) -> usize {
 }
 
 fn path(relative: &str) -> String {
-    let p = shared_data(relative);
-    assert!(Path::new(&p).exists(), "{}", p.display());
-    p.display().to_string()
+    test_data(relative).display().to_string()
 }
 
 #[test]
@@ -118,9 +115,12 @@ fn depthai_recording_plays_into_meshes() {
         })
         .collect();
     let venv = std::env::var("TACMESH_DEPTHAI_VENV").ok();
-    let written =
-        tacmesh_depthai::record_depth_frames(&recording, venv.as_deref().map(Path::new), &frames)
-            .expect("DepthAI records");
+    let written = tacmesh_depthai::record_depth_frames(
+        &recording,
+        venv.as_deref().map(std::path::Path::new),
+        &frames,
+    )
+    .expect("DepthAI records");
     assert_eq!(written, 30);
     let spec = format!(
         "depthai:{}{}",

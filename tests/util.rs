@@ -1,6 +1,6 @@
 //! Helpers that let the tests read like shell scripts.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Runs `tacmesh` with `args`; returns its output whatever the exit status.
@@ -29,12 +29,9 @@ pub fn tacmesh_json(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("not JSON ({e}): {stdout}"))
 }
 
-/// A file in the shared test data (`../shared/data` beside the repository).
-pub fn shared_data(relative: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(relative)
-}
+/// A file in the repository's test data (`testdata/`, see its SOURCES.md); a missing one fails
+/// the test naming the file and where it should be.
+pub use tacmesh_testdata::path as test_data;
 
 pub fn path_str(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")

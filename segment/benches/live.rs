@@ -8,7 +8,6 @@
 #[allow(dead_code)] // the benchmark uses the frames, not the IoU helper
 mod util;
 
-use std::path::Path;
 use std::time::Duration;
 
 use glam::Vec3;
@@ -113,9 +112,7 @@ fn main() {
             frame.sensor_in_world,
         );
         for name in ["mosd/osd_test0.pcd", "mosd/osd_test35.pcd"] {
-            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../shared/data/pointclouds")
-                .join(name);
+            let path = tacmesh_testdata::path(&format!("pointclouds/{name}"));
             match tacmesh_formats::pcd::read_pcd(&path) {
                 Ok(cloud) => report(name, &cloud.points, Vec3::ZERO),
                 Err(err) => println!("{name}: skipped ({err})"),

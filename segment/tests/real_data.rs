@@ -1,5 +1,5 @@
 //! Segmentation of real recorded scans against their ground truth (see
-//! `shared/data/SOURCES.md`): the labelled mOSD tabletop scans (per-object IoU ≥ 0.8) and PCL's
+//! `testdata/SOURCES.md`): the labelled mOSD tabletop scans (per-object IoU ≥ 0.8) and PCL's
 //! stereo mug scan (one mug-sized object).
 //!
 //! The defaults were tuned on these scans. Results with them (IoU of each ground-truth object
@@ -10,7 +10,6 @@
 //! `cluster_tolerance_m` of 0.012 or 0.02 each failed one of the three scans. The RANSAC seed
 //! does not matter (seeds 0–5 give identical results).
 
-use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -18,18 +17,9 @@ use rustc_hash::FxHashMap;
 use tacmesh_formats::pcd::read_pcd;
 use tacmesh_segment::{segment, SegmentConfig, Segmentation};
 
-const MOSD_TEST0: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/pointclouds/mosd/osd_test0.pcd"
-);
-const MOSD_TEST35: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/pointclouds/mosd/osd_test35.pcd"
-);
-const MUG: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/pointclouds/pcl/table_scene_mug_stereo_textured.pcd"
-);
+const MOSD_TEST0: &str = "pointclouds/mosd/osd_test0.pcd";
+const MOSD_TEST35: &str = "pointclouds/mosd/osd_test35.pcd";
+const MUG: &str = "pointclouds/pcl/table_scene_mug_stereo_textured.pcd";
 
 /// Segments `path` with the default config, printing the time it took.
 fn segment_file(path: &str) -> (Vec<Vec3>, Option<Vec<u32>>, Segmentation) {
@@ -41,7 +31,8 @@ fn segment_file_with(
     path: &str,
     config: &SegmentConfig,
 ) -> (Vec<Vec3>, Option<Vec<u32>>, Segmentation) {
-    let cloud = read_pcd(Path::new(path)).unwrap_or_else(|e| panic!("reading {path}: {e}"));
+    let file = tacmesh_testdata::path(path);
+    let cloud = read_pcd(&file).unwrap_or_else(|e| panic!("reading {path}: {e}"));
     let start = Instant::now();
     let seg = segment(&cloud.points, config);
     let elapsed = start.elapsed();

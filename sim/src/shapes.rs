@@ -366,12 +366,12 @@ mod tests {
 
     fn blender_export(shape: Shape) -> &'static str {
         match shape {
-            Shape::Cone => include_str!("../tests/data/blender/cone.obj"),
-            Shape::Cube => include_str!("../tests/data/blender/cube.obj"),
-            Shape::Cylinder => include_str!("../tests/data/blender/cylinder.obj"),
+            Shape::Cone => include_str!("../../testdata/meshes/cone.obj"),
+            Shape::Cube => include_str!("../../testdata/meshes/cube.obj"),
+            Shape::Cylinder => include_str!("../../testdata/meshes/cylinder.obj"),
             Shape::Monkey => SUZANNE_OBJ,
-            Shape::Torus => include_str!("../tests/data/blender/torus.obj"),
-            Shape::Sphere => include_str!("../tests/data/blender/uv_sphere.obj"),
+            Shape::Torus => include_str!("../../testdata/meshes/torus.obj"),
+            Shape::Sphere => include_str!("../../testdata/meshes/uv_sphere.obj"),
         }
     }
 

@@ -1,4 +1,4 @@
-//! The real PrimeSense recording from `shared/data/recordings` (see SOURCES.md, ONI entry),
+//! The real PrimeSense recording from `testdata/recordings` (see SOURCES.md, ONI entry),
 //! replay, and malformed variants of it.
 
 use std::io::Cursor;
@@ -19,15 +19,11 @@ const FRAME1_PAYLOAD: std::ops::Range<usize> = 100_378..100_378 + 105_410;
 const MAP_OUTPUT_MODE_VALUE: usize = 28_305 + 28 + 4 + 16 + 4;
 
 fn recording_path() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/recordings/"
-    ))
-    .join(FILE_NAME)
+    tacmesh_testdata::path(&format!("recordings/{FILE_NAME}"))
 }
 
 fn recording_bytes() -> Vec<u8> {
-    std::fs::read(recording_path()).expect("the sample recording is present")
+    tacmesh_testdata::bytes(&format!("recordings/{FILE_NAME}"))
 }
 
 fn open_bytes(bytes: Vec<u8>) -> Result<OniRecording<Cursor<Vec<u8>>>, OniError> {

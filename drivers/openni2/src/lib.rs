@@ -35,7 +35,7 @@
 //! - Once a URI such as `"Dummy"` was opened, OpenNI2 keeps that device listed, so a later
 //!   `open(None)` in the same process opens it.
 //!
-//! OpenNI2's file driver plays back the OpenNI 1 recording in `shared/data/recordings`
+//! OpenNI2's file driver plays back the OpenNI 1 recording in `testdata/recordings`
 //! (NI10 container, PrimeSense 16zT depth): all 12 frames, identical to `tacmesh-oni`'s.
 
 //! # Building

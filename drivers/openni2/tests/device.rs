@@ -4,7 +4,7 @@ use tacmesh_oni::OniRecording;
 use tacmesh_openni2::{DepthPixelFormat, OpenNi2Options};
 use tacmesh_source::{DepthSource, Observation, SourceError};
 
-use crate::util::{dummy_driver_installed, isolated, open, PRIMESENSE_ONI};
+use crate::util::{dummy_driver_installed, isolated, open, primesense_oni};
 
 #[test]
 fn no_device_fails_fast_as_device_missing() {
@@ -155,16 +155,13 @@ fn two_sources_share_one_library_initialisation() {
 #[test]
 fn openni1_recording_through_openni2_playback() {
     isolated("device::openni1_recording_through_openni2_playback", || {
-        if !std::path::Path::new(PRIMESENSE_ONI).is_file() {
-            eprintln!("{PRIMESENSE_ONI} not found; skipping");
-            return;
-        }
-        let (result, took) = open(Some(PRIMESENSE_ONI));
+        let oni = primesense_oni();
+        let oni = oni.to_str().expect("the repository's paths are UTF-8");
+        let (result, took) = open(Some(oni));
         assert!(took < Duration::from_secs(10), "took {took:?}");
         match result {
             Ok(mut source) => {
-                let mut reference =
-                    OniRecording::open(PRIMESENSE_ONI).expect("tacmesh-oni reads it");
+                let mut reference = OniRecording::open(oni).expect("tacmesh-oni reads it");
                 let expected_k = reference.depth().intrinsics().expect("recorded intrinsics");
                 eprintln!(
                     "OpenNI2 playback: mode {:?}, fov {:?} rad",

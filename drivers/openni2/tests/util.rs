@@ -1,3 +1,4 @@
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -58,7 +59,7 @@ pub fn dummy_driver_installed() -> bool {
     })
 }
 
-pub const PRIMESENSE_ONI: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/recordings/openni1_primesense_12frames_640x480.oni"
-);
+/// The real PrimeSense recording in `testdata/recordings` (see its SOURCES.md).
+pub fn primesense_oni() -> PathBuf {
+    tacmesh_testdata::path("recordings/openni1_primesense_12frames_640x480.oni")
+}

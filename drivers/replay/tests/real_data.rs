@@ -1,6 +1,6 @@
-//! The decoders and sources against the real recordings in `shared/data` (see its SOURCES.md).
+//! The decoders and sources against the real recordings in `testdata/` (see its SOURCES.md).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use tacmesh_replay::decode::{decode_pgm, decode_png, decode_tiff, decode_z16};
@@ -12,17 +12,7 @@ use tacmesh_replay::{
 use tacmesh_source::glam::{Affine3A, Vec3};
 use tacmesh_source::{DepthFrame, DepthSource, Intrinsics, Observation, SourceError};
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
-
-fn data(rel: &str) -> PathBuf {
-    let path = Path::new(DATA).join(rel);
-    assert!(path.exists(), "test data missing: {}", path.display());
-    path
-}
-
-fn bytes(rel: &str) -> Vec<u8> {
-    std::fs::read(data(rel)).expect("test data reads")
-}
+use tacmesh_testdata::{bytes, path as data};
 
 const D435_Z16: &str = "depth/realsense_d435/frame0_640x480.z16";
 const D435_PNG: &str = "depth/realsense_d435/frame0_depth.png";

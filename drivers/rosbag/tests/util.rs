@@ -6,12 +6,12 @@ use tacmesh_rosbag::{Bag, BagError, Image, Message};
 
 /// The real RealSense D435 recording (SOURCES.md, `recordings/`).
 pub fn d435_bag() -> PathBuf {
-    PathBuf::from("/work/shared/data/recordings/realsense_d435_single_depth_color_640x480.bag")
+    tacmesh_testdata::path("recordings/realsense_d435_single_depth_color_640x480.bag")
 }
 
 /// The first depth frame of that bag as raw little-endian Z16 (SOURCES.md, `depth/realsense_d435/`).
 pub fn d435_frame0_z16() -> Vec<u8> {
-    std::fs::read("/work/shared/data/depth/realsense_d435/frame0_640x480.z16").unwrap()
+    tacmesh_testdata::bytes("depth/realsense_d435/frame0_640x480.z16")
 }
 
 pub const DEPTH_TOPIC: &str = "/device_0/sensor_0/Depth_0/image/data";

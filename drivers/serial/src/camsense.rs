@@ -1,7 +1,7 @@
 //! Camsense X1-style 360° scanner protocol: a pure, streaming decoder (no I/O).
 //!
 //! Layout of one 36-byte packet (all integers little-endian), as described for the recorded
-//! capture in `shared/data/SOURCES.md` and by the community's reverse engineering of the X1:
+//! capture in `testdata/SOURCES.md` and by the community's reverse engineering of the X1:
 //!
 //! | offset | size | field |
 //! |---|---|---|

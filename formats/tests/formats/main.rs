@@ -1,4 +1,4 @@
-//! Integration tests of `tacmesh-formats`: real sample files from `shared/data`, round trips
+//! Integration tests of `tacmesh-formats`: real sample files from `testdata/`, round trips
 //! through files, rejection of broken files, and a seeded mangling run that must never panic.
 
 mod util;

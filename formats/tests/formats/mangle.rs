@@ -3,8 +3,8 @@
 
 use tacmesh_formats::{obj, pcd, ply, write_cloud, write_mesh, xyz};
 
-use crate::data;
 use crate::round_trip::{binary_pcd_sample, compressed_pcd};
+use crate::util::data;
 use crate::util::{read, scratch, Lcg};
 
 #[derive(Debug, Clone, Copy)]
@@ -78,46 +78,46 @@ fn mangled_real_files_never_panic() {
         (
             "milk.pcd",
             Format::Pcd,
-            read(data!("pointclouds/pcl/milk.pcd")),
+            read(&data("pointclouds/pcl/milk.pcd")),
         ),
         (
             "table_scene_mug_stereo_textured.pcd",
             Format::Pcd,
-            read(data!("pointclouds/pcl/table_scene_mug_stereo_textured.pcd")),
+            read(&data("pointclouds/pcl/table_scene_mug_stereo_textured.pcd")),
         ),
         (
             "osd_test0.pcd",
             Format::Pcd,
-            read(data!("pointclouds/mosd/osd_test0.pcd")),
+            read(&data("pointclouds/mosd/osd_test0.pcd")),
         ),
         (
             "frame_20121214T142255.814212.pcd",
             Format::Pcd,
-            read(data!(
-                "depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd"
+            read(&data(
+                "depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd",
             )),
         ),
         (
             "bun000.ply",
             Format::PlyCloud,
-            read(data!("pointclouds/stanford_bunny/bun000.ply")),
+            read(&data("pointclouds/stanford_bunny/bun000.ply")),
         ),
         (
             "bun_zipper_res2.ply",
             Format::PlyMesh,
-            read(data!("pointclouds/stanford_bunny/bun_zipper_res2.ply")),
+            read(&data("pointclouds/stanford_bunny/bun_zipper_res2.ply")),
         ),
         (
             "suzanne.obj",
             Format::Obj,
-            read(data!("meshes/suzanne.obj")),
+            read(&data("meshes/suzanne.obj")),
         ),
         (
             "suzanne_blender283_with_uv_normals.obj",
             Format::Obj,
-            read(data!("meshes/suzanne_blender283_with_uv_normals.obj")),
+            read(&data("meshes/suzanne_blender283_with_uv_normals.obj")),
         ),
-        ("cube.obj", Format::Obj, read(data!("meshes/cube.obj"))),
+        ("cube.obj", Format::Obj, read(&data("meshes/cube.obj"))),
     ];
     for (seed, (name, format, bytes)) in files.iter().enumerate() {
         mangle(name, *format, bytes, seed as u64 + 1);
@@ -126,7 +126,7 @@ fn mangled_real_files_never_panic() {
 
 #[test]
 fn mangled_written_files_never_panic() {
-    let mesh = tacmesh_formats::read_mesh(data!("meshes/suzanne.obj")).unwrap();
+    let mesh = tacmesh_formats::read_mesh(&data("meshes/suzanne.obj")).unwrap();
     let (_dir, ply_path) = scratch("suzanne.ply");
     write_mesh(&ply_path, &mesh).unwrap();
     let cloud = tacmesh_source::PointCloud::with_normals(

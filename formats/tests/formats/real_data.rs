@@ -1,24 +1,24 @@
-//! Counts and ranges of the real sample files, as recorded in `shared/data/SOURCES.md`.
+//! Counts and ranges of the real sample files, as recorded in `testdata/SOURCES.md`.
 
 use std::collections::BTreeSet;
 
 use tacmesh_formats::{pcd, read_cloud, read_mesh};
 
-use crate::data;
+use crate::util::data;
 
 #[test]
 fn milk_pcd_is_13704_unorganised_points() {
-    let pcd = pcd::read_pcd(data!("pointclouds/pcl/milk.pcd")).unwrap();
+    let pcd = pcd::read_pcd(&data("pointclouds/pcl/milk.pcd")).unwrap();
     assert_eq!((pcd.width, pcd.height), (13704, 1));
     assert_eq!(pcd.points.len(), 13704);
     assert_eq!(pcd.rgba, None);
-    let cloud = read_cloud(data!("pointclouds/pcl/milk.pcd")).unwrap();
+    let cloud = read_cloud(&data("pointclouds/pcl/milk.pcd")).unwrap();
     assert_eq!(cloud.len(), 13704);
 }
 
 #[test]
 fn table_scene_mug_is_640x480_with_209280_finite_points_from_0_69_to_2_59_m() {
-    let path = data!("pointclouds/pcl/table_scene_mug_stereo_textured.pcd");
+    let path = &data("pointclouds/pcl/table_scene_mug_stereo_textured.pcd");
     let pcd = pcd::read_pcd(path).unwrap();
     assert_eq!((pcd.width, pcd.height), (640, 480));
     assert_eq!(pcd.points.len(), 307_200);
@@ -33,7 +33,7 @@ fn table_scene_mug_is_640x480_with_209280_finite_points_from_0_69_to_2_59_m() {
 
 #[test]
 fn osd_test0_has_a_label_per_pixel_and_two_objects() {
-    let pcd = pcd::read_pcd(data!("pointclouds/mosd/osd_test0.pcd")).unwrap();
+    let pcd = pcd::read_pcd(&data("pointclouds/mosd/osd_test0.pcd")).unwrap();
     assert_eq!((pcd.width, pcd.height), (640, 480));
     let labels = pcd.labels.as_ref().expect("a label field");
     assert_eq!(labels.len(), 307_200);
@@ -53,7 +53,7 @@ fn osd_test0_has_a_label_per_pixel_and_two_objects() {
 
 #[test]
 fn kinect_grabber_frame_is_640x480_with_271575_finite_points() {
-    let path = data!("depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd");
+    let path = &data("depth/pcl_kinect_grabber/frame_20121214T142255.814212.pcd");
     let pcd = pcd::read_pcd(path).unwrap();
     assert_eq!((pcd.width, pcd.height), (640, 480));
     assert_eq!(pcd.points.len(), 307_200);
@@ -67,14 +67,14 @@ fn kinect_grabber_frame_is_640x480_with_271575_finite_points() {
 
 #[test]
 fn bun000_reads_40256_vertices_past_its_range_grid() {
-    let cloud = read_cloud(data!("pointclouds/stanford_bunny/bun000.ply")).unwrap();
+    let cloud = read_cloud(&data("pointclouds/stanford_bunny/bun000.ply")).unwrap();
     assert_eq!(cloud.len(), 40_256);
     assert_eq!(cloud.normals, None);
 }
 
 #[test]
 fn bun_zipper_res2_is_8171_vertices_and_16301_triangles() {
-    let path = data!("pointclouds/stanford_bunny/bun_zipper_res2.ply");
+    let path = &data("pointclouds/stanford_bunny/bun_zipper_res2.ply");
     let mesh = read_mesh(path).unwrap();
     assert_eq!(mesh.vertices.len(), 8171);
     assert_eq!(mesh.triangles.len(), 16_301);
@@ -84,7 +84,7 @@ fn bun_zipper_res2_is_8171_vertices_and_16301_triangles() {
 
 #[test]
 fn suzanne_obj_is_507_vertices_and_968_triangles() {
-    let mesh = read_mesh(data!("meshes/suzanne.obj")).unwrap();
+    let mesh = read_mesh(&data("meshes/suzanne.obj")).unwrap();
     assert_eq!(mesh.vertices.len(), 507);
     assert_eq!(mesh.triangles.len(), 968);
     let (lo, hi) = mesh.bounds().unwrap();
@@ -93,15 +93,15 @@ fn suzanne_obj_is_507_vertices_and_968_triangles() {
 
 #[test]
 fn suzanne_with_uvs_and_normals_reads_as_the_same_mesh() {
-    let plain = read_mesh(data!("meshes/suzanne.obj")).unwrap();
-    let textured = read_mesh(data!("meshes/suzanne_blender283_with_uv_normals.obj")).unwrap();
+    let plain = read_mesh(&data("meshes/suzanne.obj")).unwrap();
+    let textured = read_mesh(&data("meshes/suzanne_blender283_with_uv_normals.obj")).unwrap();
     assert_eq!(textured.vertices.len(), plain.vertices.len());
     assert_eq!(textured.triangles.len(), plain.triangles.len());
 }
 
 #[test]
 fn cube_obj_is_8_vertices_and_12_triangles_of_area_24() {
-    let mesh = read_mesh(data!("meshes/cube.obj")).unwrap();
+    let mesh = read_mesh(&data("meshes/cube.obj")).unwrap();
     assert_eq!(mesh.vertices.len(), 8);
     assert_eq!(mesh.triangles.len(), 12);
     assert!((mesh.area() - 24.0).abs() < 1e-4);

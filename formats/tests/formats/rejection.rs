@@ -5,8 +5,8 @@ use std::path::Path;
 use tacmesh_formats::{read_cloud, read_mesh, write_cloud, write_mesh, FormatError};
 use tacmesh_source::{PointCloud, TriMesh};
 
-use crate::data;
 use crate::round_trip::{binary_pcd_sample, compressed_pcd};
+use crate::util::data;
 use crate::util::{ply_header_len, read, scratch, scratch_file, small_mesh};
 
 type Reader = fn(&Path) -> Result<(), FormatError>;
@@ -60,7 +60,7 @@ fn pcd_header_len(bytes: &[u8]) -> usize {
 
 #[test]
 fn truncated_compressed_pcd_is_an_error() {
-    let bytes = read(data!("pointclouds/pcl/milk.pcd"));
+    let bytes = read(&data("pointclouds/pcl/milk.pcd"));
     let header_len = pcd_header_len(&bytes);
     // PCL pads the file past the compressed block (3913 bytes here); cutting the padding is
     // harmless, so the cuts are made up to the block's end.
@@ -116,7 +116,7 @@ fn truncated_binary_ply_is_an_error() {
 
 #[test]
 fn truncated_ascii_ply_is_an_error() {
-    let bytes = read(data!("pointclouds/stanford_bunny/bun_zipper_res2.ply"));
+    let bytes = read(&data("pointclouds/stanford_bunny/bun_zipper_res2.ply"));
     // The last face line is "3 a b c"; cutting inside it can leave a valid shorter number.
     for len in cut_points(bytes.len() - 30, ply_header_len(&bytes)) {
         expect_error("bunny.ply", &bytes, len, mesh_reader);
@@ -130,7 +130,7 @@ fn truncated_ascii_ply_is_an_error() {
 
 #[test]
 fn obj_cut_inside_a_vertex_or_before_referenced_vertices_is_an_error() {
-    let bytes = read(data!("meshes/cube.obj"));
+    let bytes = read(&data("meshes/cube.obj"));
     let text = std::str::from_utf8(&bytes).unwrap();
     let inside_vertex = text.find("v 1.000000 -1.000000 -1.000000").unwrap() + 20;
     let message = expect_error("cube.obj", &bytes, inside_vertex, mesh_reader);

@@ -4,12 +4,12 @@ use glam::Vec3;
 use tacmesh_formats::{pcd, read_cloud, read_mesh, write_cloud, write_mesh};
 use tacmesh_source::PointCloud;
 
-use crate::data;
+use crate::util::data;
 use crate::util::{ply_header_len, read, scratch, scratch_file, small_mesh};
 
 /// The first `n` points of the bunny scan, with made-up unit normals when asked.
 fn bunny_cloud(n: usize, with_normals: bool) -> PointCloud {
-    let points: Vec<Vec3> = read_cloud(data!("pointclouds/stanford_bunny/bun000.ply"))
+    let points: Vec<Vec3> = read_cloud(&data("pointclouds/stanford_bunny/bun000.ply"))
         .unwrap()
         .points
         .into_iter()
@@ -25,7 +25,7 @@ fn bunny_cloud(n: usize, with_normals: bool) -> PointCloud {
 
 #[test]
 fn binary_ply_mesh_round_trips_with_its_face_lists_intact() {
-    let mesh = read_mesh(data!("meshes/suzanne.obj")).unwrap();
+    let mesh = read_mesh(&data("meshes/suzanne.obj")).unwrap();
     let (_dir, path) = scratch("suzanne.ply");
     write_mesh(&path, &mesh).unwrap();
 
@@ -51,7 +51,7 @@ fn binary_ply_mesh_round_trips_with_its_face_lists_intact() {
 fn obj_mesh_round_trips_exactly() {
     for mesh in [
         small_mesh(),
-        read_mesh(data!("meshes/suzanne.obj")).unwrap(),
+        read_mesh(&data("meshes/suzanne.obj")).unwrap(),
     ] {
         let (_dir, path) = scratch("m.obj");
         write_mesh(&path, &mesh).unwrap();

@@ -5,17 +5,8 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use tacmesh_source::TriMesh;
 
-/// A file under `shared/data/`, which sits beside the repository checkout.
-#[macro_export]
-macro_rules! data {
-    ($relative:literal) => {
-        std::path::Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/data/",
-            $relative
-        ))
-    };
-}
+/// A file in the repository's test data (`testdata/`, see its SOURCES.md).
+pub use tacmesh_testdata::path as data;
 
 /// A scratch directory removed when dropped, and a path in it.
 pub fn scratch(file_name: &str) -> (tempfile::TempDir, PathBuf) {

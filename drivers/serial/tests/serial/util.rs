@@ -9,13 +9,9 @@ use serialport::{SerialPort, TTYPort};
 use tacmesh_serial::camsense::CamsenseScanner;
 use tacmesh_serial::Revolution;
 
-/// The recorded Camsense X1-style byte stream (see `shared/data/SOURCES.md`, serial/).
+/// The recorded Camsense X1-style byte stream (see `testdata/SOURCES.md`, serial/).
 pub fn capture() -> Vec<u8> {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/serial/camsense_x1_protocol_uart_capture.bin"
-    );
-    std::fs::read(path).expect("read the Camsense capture from shared/data/serial")
+    tacmesh_testdata::bytes("serial/camsense_x1_protocol_uart_capture.bin")
 }
 
 /// A pseudo-terminal pair: the master (the "device" end, short timeouts), the slave kept open

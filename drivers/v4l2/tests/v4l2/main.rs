@@ -1,4 +1,4 @@
-//! One test binary: the decoder against the real RealSense D435 frame in `shared/data`, and the
+//! One test binary: the decoder against the real RealSense D435 frame in `testdata/`, and the
 //! capture backend's errors on nodes that are not depth cameras (no hardware needed).
 
 mod real_frame;

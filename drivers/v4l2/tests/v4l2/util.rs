@@ -2,12 +2,9 @@ use std::path::PathBuf;
 
 use tacmesh_source::Intrinsics;
 
-/// `shared/data/depth/realsense_d435/` (see `shared/data/SOURCES.md`).
+/// `testdata/depth/realsense_d435/` (see `testdata/SOURCES.md`).
 pub fn d435_dir() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/depth/realsense_d435"
-    ))
+    tacmesh_testdata::path("depth/realsense_d435")
 }
 
 pub const WIDTH: u32 = 640;
