@@ -4,6 +4,7 @@
 //! - [`pipeline::mesh_cloud`]: one point cloud to one small mesh, with a stage-by-stage report.
 //! - [`frame_ring::FrameRing`]: the bounded, drop-oldest queue between sensors and pipeline.
 //! - [`latency::LatencyWindow`]: p50/p99 latencies for the daemon's stats.
+//! - [`log_sink::StderrSink`]: log output that survives a log reader going away.
 //! - [`daemon::Daemon`]: `tacmesh run`, the live daemon; [`subscriber::Subscription`]: a client.
 //! - Re-exported crates: [`formats`] (files), [`reconstruct`], [`simplify`], [`sim`] (shapes,
 //!   sampling, the metric, a simulated depth camera), [`source`] (the depth-source trait and
@@ -12,6 +13,7 @@
 pub mod daemon;
 pub mod frame_ring;
 pub mod latency;
+pub mod log_sink;
 pub mod pipeline;
 pub mod subscriber;
 

@@ -12,8 +12,9 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            // One place reports errors: the chain says what failed and why.
-            eprintln!("tacmesh: error: {err:#}");
+            // One place reports errors: the chain says what failed and why. Not `eprintln!`,
+            // which panics when standard error is closed.
+            tacmesh::log_sink::eprint_line(&format!("tacmesh: error: {err:#}"));
             ExitCode::FAILURE
         }
     }

@@ -52,3 +52,24 @@ fn too_few_points_is_a_clear_error() {
     let stderr = stderr_of(&["mesh", path_str(&path), "-o", &out]);
     assert!(stderr.contains("too few"), "{stderr}");
 }
+
+/// `tacmesh eval … | head -0`: a closed standard output is a clear error and exit 1, not the
+/// panic (exit 101) that `println!` gives on a broken pipe.
+#[test]
+fn a_closed_stdout_is_an_error_not_a_panic() {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["eval", "cube", "cube"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("tacmesh runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("waits");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{}: {stderr}", out.status);
+    assert!(
+        stderr.contains("cannot write to standard output"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

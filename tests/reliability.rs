@@ -864,3 +864,66 @@ fn only_the_allowed_users_may_subscribe() {
         }
     }
 }
+
+/// A daemon whose log reader goes away (`tacmesh run 2>&1 | head -1`, or journald restarting
+/// under a service) keeps serving and stops cleanly: writes to the closed standard error fail
+/// with EPIPE, which used to panic inside the logging path and abort the process (exit 134,
+/// socket left behind, no Goodbye). The lost lines are counted in the counters line, which goes
+/// to the systemd STATUS line too.
+#[test]
+fn a_closed_log_stream_neither_stops_serving_nor_spoils_the_shutdown() {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let socket = dir.path().join("t.sock");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["run", "--sensor", "sim:demo", "--socket"])
+        .arg(&socket)
+        .env("RUST_LOG", "debug")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("tacmesh runs");
+    // Read one line, as `head -1` does, then close the pipe's only reading end.
+    let mut first = String::new();
+    let mut stderr = BufReader::new(child.stderr.take().expect("stderr is piped"));
+    stderr.read_line(&mut first).expect("a first log line");
+    drop(stderr);
+    let started = Instant::now();
+    while UnixStream::connect(&socket).is_err() {
+        assert!(
+            child.try_wait().expect("waits").is_none(),
+            "the daemon died"
+        );
+        assert!(started.elapsed() < Duration::from_secs(30), "no socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Every connect, disconnect, object and mesh now logs into the closed pipe.
+    let subscriber = Collector::start(
+        Subscription::connect(&socket, Some(Duration::from_secs(10))).expect("subscribes"),
+    );
+    for _ in 0..20 {
+        drop(UnixStream::connect(&socket).expect("connects"));
+    }
+    std::thread::sleep(Duration::from_secs(4));
+    assert!(
+        child.try_wait().expect("waits").is_none(),
+        "the daemon died once its log reader went away"
+    );
+    let (status, _) = crate::util::terminate(&mut child, Duration::from_secs(15));
+    let got = subscriber.finish();
+    eprintln!(
+        "closed stderr: first line {first:?}; {} upserts, exit {status}",
+        got.upserts.len()
+    );
+    assert!(status.success(), "exit {status}");
+    assert!(
+        got.upserts
+            .iter()
+            .any(|(_, u)| u.object_id < FIRST_PLANE_ID),
+        "no object mesh reached the subscriber"
+    );
+    assert!(got.goodbye, "no Goodbye");
+    assert!(!socket.exists(), "the socket file was left behind");
+}

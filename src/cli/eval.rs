@@ -55,10 +55,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if args.json {
         super::print_json(&report)
     } else {
-        println!(
+        super::print_line(&format!(
             "mhe {:.5} m  hausdorff {:.5} m  rms {:.5} m  faces {} (reference {})",
             report.mhe, report.hausdorff, report.rms, report.faces, report.reference_faces
-        );
-        Ok(())
+        ))
     }
 }

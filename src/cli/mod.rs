@@ -61,9 +61,12 @@ pub fn init_logging(verbose: u8, config_level: Option<&str>) {
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fallback));
+    // A closed or broken standard error (a log reader that went away, a restarted journald)
+    // drops and counts lines instead of failing the write (see `log_sink`).
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr);
+        .with_writer(tacmesh::log_sink::StderrSink)
+        .log_internal_errors(false);
     if stderr_is_journal() {
         builder
             .with_ansi(false)
@@ -164,6 +167,15 @@ pub(crate) fn shape_or_mesh_file(name: &str) -> anyhow::Result<TriMesh> {
 
 /// Prints `value` as one JSON object on standard output.
 pub(crate) fn print_json(value: &impl serde::Serialize) -> anyhow::Result<()> {
-    println!("{}", serde_json::to_string(value)?);
-    Ok(())
+    print_line(&serde_json::to_string(value)?)
+}
+
+/// Prints `line` on standard output. A closed standard output (`tacmesh eval … | head -0`) is
+/// an error the caller reports, not a panic as with `println!`.
+pub(crate) fn print_line(line: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")
+        .and_then(|()| out.flush())
+        .context("cannot write to standard output")
 }

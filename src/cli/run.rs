@@ -83,11 +83,11 @@ pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
     }
 
     let daemon = Daemon::start(config).context("tacmesh run cannot start")?;
-    eprintln!(
+    tacmesh::log_sink::eprint_line(&format!(
         "tacmesh: serving meshes on {}\ntacmesh: watch them with: tacmesh subscribe --socket {}",
         daemon.socket_path().display(),
         daemon.socket_path().display()
-    );
+    ));
     daemon.run_until_stopped(&stop);
     Ok(())
 }

@@ -104,6 +104,8 @@ pub struct CounterSnapshot {
     pub meshing_runs: u64,
     pub meshing_failures: u64,
     pub pose_updates: u64,
+    /// Log lines that standard error did not take (a log reader or journald went away).
+    pub log_lines_dropped: u64,
     /// `(stage name, p50 ms, p99 ms)` in pipeline order.
     pub stages: Vec<(&'static str, f32, f32)>,
     pub frame_to_publish_p50_ms: f32,
@@ -151,6 +153,7 @@ impl Counters {
             meshing_runs: load(&self.meshing_runs),
             meshing_failures: load(&self.meshing_failures),
             pose_updates: load(&self.pose_updates),
+            log_lines_dropped: crate::log_sink::dropped_lines(),
             stages,
             frame_to_publish_p50_ms,
             frame_to_publish_p99_ms,
@@ -193,7 +196,7 @@ impl CounterSnapshot {
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
              objects {}, meshing runs {} (failed {}), pose updates {}, meshes published {}, \
-             bytes sent {}, subscribers {} (dropped {}); frame-to-publish p50/p99 {:.1}/{:.1} ms; \
+             bytes sent {}, subscribers {} (dropped {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
             self.frames_processed,
@@ -210,6 +213,7 @@ impl CounterSnapshot {
             self.publisher.bytes_sent,
             self.publisher.clients_connected,
             self.publisher.clients_dropped,
+            self.log_lines_dropped,
             self.frame_to_publish_p50_ms,
             self.frame_to_publish_p99_ms,
             stages.join(", ")

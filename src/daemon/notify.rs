@@ -454,17 +454,25 @@ impl SystemdFeed {
     }
 }
 
-/// The one-line summary `systemctl status` shows.
+/// The one-line summary `systemctl status` shows. Lost log lines are named there when there
+/// are any, since the log itself cannot say so once its stream is gone.
 pub fn status_line(frames_per_s: f64, counters: &CounterSnapshot) -> String {
     let subscribers = counters.publisher.clients_connected;
-    format!(
+    let mut line = format!(
         "{frames_per_s:.1} frames/s, {} objects, {subscribers} subscriber{}, {} frames dropped, \
          {} source errors",
         counters.objects_tracked,
         if subscribers == 1 { "" } else { "s" },
         counters.ring.dropped,
         counters.source_errors,
-    )
+    );
+    if counters.log_lines_dropped > 0 {
+        line += &format!(
+            ", {} log lines lost (standard error is closed)",
+            counters.log_lines_dropped
+        );
+    }
+    line
 }
 
 #[cfg(test)]
@@ -713,6 +721,18 @@ mod tests {
         assert_eq!(
             status_line(29.96, &snapshot),
             "30.0 frames/s, 4 objects, 1 subscriber, 7 frames dropped, 0 source errors"
+        );
+    }
+
+    #[test]
+    fn the_status_line_names_lost_log_lines() {
+        let mut snapshot = counters(100, 0, 0);
+        snapshot.log_lines_dropped = 12;
+        assert!(
+            status_line(30.0, &snapshot)
+                .ends_with(", 12 log lines lost (standard error is closed)"),
+            "{}",
+            status_line(30.0, &snapshot)
         );
     }
 }
