@@ -123,7 +123,7 @@ pub struct Daemon {
     perception: Option<JoinHandle<()>>,
     meshers: Vec<JoinHandle<()>>,
     started: Instant,
-    /// The source threads' heartbeats, for the watchdog.
+    /// The source and mesher threads' heartbeats, for the watchdog.
     heartbeats: Heartbeats,
     /// READY=1, STATUS=, WATCHDOG=1 and STOPPING=1 to systemd (a no-op without it).
     systemd: SystemdFeed,
@@ -192,11 +192,17 @@ impl Daemon {
                 .spawn(body)
                 .map_err(|source| DaemonError::Spawn { name, source })
         };
-        for _ in 0..shared.config.mesh.workers {
+        for worker in 0..shared.config.mesh.workers {
             let s = Arc::clone(&shared);
-            daemon
-                .meshers
-                .push(spawn("mesher", Box::new(move || mesher::run_mesher(&s)))?);
+            // Each worker is watched on its own: one stuck in a run stops the watchdog pings
+            // even while the others keep meshing.
+            let heartbeat = daemon
+                .heartbeats
+                .register_worker(&format!("mesher {worker}"), notify::MESH_RUN_LIMIT);
+            daemon.meshers.push(spawn(
+                "mesher",
+                Box::new(move || mesher::run_mesher(&s, &heartbeat)),
+            )?);
         }
         let s = Arc::clone(&shared);
         daemon.perception = Some(spawn(

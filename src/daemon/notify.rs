@@ -19,9 +19,12 @@
 //! - The perception thread is watched by its [`Progress`] through the ring: it is stalled when
 //!   frames have waited in the ring, with none taken, for the whole time. An idle pipeline (no
 //!   frames because the sensor is gone) is not stalled.
-//! - The mesher threads likewise through the mesh queue: stalled when jobs have waited and no
-//!   meshing run has finished. With several workers, one stuck worker goes unnoticed as long
-//!   as another keeps meshing.
+//! - Each mesher thread beats its own heartbeat when it takes a job, when it finishes one and
+//!   every second while it waits for one, so one worker stuck inside a meshing run (or dead by
+//!   a panic) trips the watchdog even while the others keep meshing. Its limit is
+//!   [`MESH_RUN_LIMIT`], not [`STALL_AFTER`]: one run of a large object is legitimately long.
+//!   The mesh queue is also watched as a whole: stalled when jobs have waited and no meshing
+//!   run has finished.
 //! - The daemon's main thread does the looking and the sending, so if it is stuck, nothing is
 //!   sent either.
 //!
@@ -44,6 +47,11 @@ use super::counters::CounterSnapshot;
 /// so that a loaded machine is not mistaken for a stuck one; systemd's own `WatchdogSec=` then
 /// adds its delay before it kills the daemon.
 pub const STALL_AFTER: Duration = Duration::from_secs(5);
+
+/// A mesher thread that has been inside one meshing run for this long is stuck. A run of the
+/// largest object the default size limits allow takes well under a second in a release build
+/// and a few seconds in a debug build on a loaded machine.
+pub const MESH_RUN_LIMIT: Duration = Duration::from_secs(30);
 
 /// How often the STATUS= line is refreshed.
 pub const STATUS_INTERVAL: Duration = Duration::from_secs(2);
@@ -234,6 +242,9 @@ struct Slot {
     /// Milliseconds after the epoch of the last beat; [`RETIRED`] once the thread has ended.
     last_beat_ms: AtomicU64,
     beaten: AtomicBool,
+    /// A worker's own silence limit, instead of the one [`Heartbeats::stalled`] is given;
+    /// `None` for a source thread.
+    limit: Option<Duration>,
 }
 
 const RETIRED: u64 = u64::MAX;
@@ -265,10 +276,22 @@ impl Heartbeat {
 impl Heartbeats {
     /// A heartbeat for the thread `name`, counted as beaten now.
     pub fn register(&self, name: &str) -> Heartbeat {
+        self.register_slot(name, None)
+    }
+
+    /// A heartbeat for the worker thread `name` (a mesher), stalled only after `limit` of
+    /// silence ([`MESH_RUN_LIMIT`]) whatever limit [`Heartbeats::stalled`] is given. A worker
+    /// reads no sensor, so its beats do not count for [`Heartbeats::any_beaten`].
+    pub fn register_worker(&self, name: &str, limit: Duration) -> Heartbeat {
+        self.register_slot(name, Some(limit))
+    }
+
+    fn register_slot(&self, name: &str, limit: Option<Duration>) -> Heartbeat {
         let slot = Arc::new(Slot {
             name: name.to_owned(),
             last_beat_ms: AtomicU64::new(millis_since(self.epoch, Instant::now())),
             beaten: AtomicBool::new(false),
+            limit,
         });
         crate::lock(&self.slots).push(Arc::clone(&slot));
         Heartbeat {
@@ -277,18 +300,20 @@ impl Heartbeats {
         }
     }
 
-    /// True once any thread has beaten its heartbeat itself (it is running, not just spawned).
+    /// True once any source thread has beaten its heartbeat itself (it is reading, not just
+    /// spawned): the daemon is ready then.
     pub fn any_beaten(&self) -> bool {
         crate::lock(&self.slots)
             .iter()
-            .any(|slot| slot.beaten.load(Ordering::Relaxed))
+            .any(|slot| slot.limit.is_none() && slot.beaten.load(Ordering::Relaxed))
     }
 
-    /// The first thread whose last beat is older than `limit` at `now`, described.
+    /// The first thread whose last beat is older than its limit at `now` (`limit`, unless it
+    /// was registered with its own), described.
     pub fn stalled(&self, now: Instant, limit: Duration) -> Option<String> {
         let now_ms = millis_since(self.epoch, now);
-        let limit_ms = limit.as_millis() as u64;
         crate::lock(&self.slots).iter().find_map(|slot| {
+            let limit_ms = slot.limit.unwrap_or(limit).as_millis() as u64;
             let last = slot.last_beat_ms.load(Ordering::Relaxed);
             let silent_ms = now_ms.saturating_sub(last);
             (last != RETIRED && silent_ms > limit_ms).then(|| {
@@ -734,5 +759,53 @@ mod tests {
             "{}",
             status_line(30.0, &snapshot)
         );
+    }
+
+    /// Several meshers: one stuck inside a run while the other keeps meshing (the queue as a
+    /// whole moves) still stops the pings, once the stuck one passes its own limit; the
+    /// source's shorter limit does not apply to it.
+    #[test]
+    fn one_stuck_mesher_among_several_stops_the_watchdog_pings() {
+        let (_dir, socket, notifier) = manager(Some("2000000"));
+        let heartbeats = Heartbeats::default();
+        let source = heartbeats.register("source");
+        let busy = heartbeats.register_worker("mesher 0", MESH_RUN_LIMIT);
+        let stuck = heartbeats.register_worker("mesher 1", MESH_RUN_LIMIT);
+        assert!(!heartbeats.any_beaten());
+        busy.beat();
+        stuck.beat();
+        assert!(
+            !heartbeats.any_beaten(),
+            "meshers do not make the daemon ready"
+        );
+        let t0 = Instant::now();
+        let mut feed = SystemdFeed::new(notifier, t0);
+        let mut pings_at = |at: Instant, runs: u64| {
+            // Shift the beats the living threads would have made by `at`.
+            let beat_at = |h: &Heartbeat| {
+                h.slot.last_beat_ms.store(
+                    millis_since(h.epoch, at),
+                    std::sync::atomic::Ordering::Relaxed,
+                )
+            };
+            beat_at(&source);
+            beat_at(&busy);
+            let snapshot = CounterSnapshot {
+                meshing_runs: runs,
+                ..counters(0, 0, 0)
+            };
+            feed.tick(at, &heartbeats, &snapshot, 1);
+            received(&socket)
+                .iter()
+                .filter(|m| *m == "WATCHDOG=1")
+                .count()
+        };
+        // Past the source's limit but within the mesher's: still fed.
+        assert_eq!(pings_at(t0, 1), 1);
+        assert_eq!(pings_at(t0 + STALL_AFTER * 2, 2), 1);
+        // The stuck worker passes its own limit while the other keeps finishing runs.
+        assert_eq!(pings_at(t0 + MESH_RUN_LIMIT + Duration::from_secs(1), 3), 0);
+        stuck.retire();
+        assert_eq!(pings_at(t0 + MESH_RUN_LIMIT + Duration::from_secs(3), 4), 1);
     }
 }
