@@ -16,6 +16,7 @@
 #   hardening         the unit's sandbox is really applied to the running daemon
 #   default-sensor    the default sensor (the simulated demo scene) works under it
 #   subscribe-member  a user whose group is tacmesh gets meshes
+#   subscribe-supplementary  so does a user who is only a supplementary member of tacmesh
 #   refuse-outsider   a user outside group tacmesh is refused by the socket's permissions
 #   refuse-not-allowed root, whom file modes do not stop, is refused by socket.allow_groups
 #   journald-restart  `systemctl restart systemd-journald` does not kill or restart the daemon
@@ -101,7 +102,7 @@ if systemd-sysusers tacmesh.conf && systemd-sysusers /usr/lib/tacmesh-live/users
   groups="$(id -nG tacmesh)"
   if grep -qw video <<<"$groups" && grep -qw dialout <<<"$groups"; then
     pass sysusers "user tacmesh $(id -u tacmesh), groups: $groups;" \
-      "test users: $(id tm-member), $(id tm-outsider)"
+      "test users: $(id tm-member), $(id tm-supplementary), $(id tm-outsider)"
   else
     fail sysusers "user tacmesh is not in video and dialout: $(id tacmesh)"
   fi
@@ -188,6 +189,17 @@ if [ "$sub_rc" = 0 ] && [ "$sub_meshes" -ge 5 ]; then
     "$(since "$started") s, first: $(grep -m 1 '^upsert object ' <<<"$sub_out")"
 else
   fail subscribe-member "tm-member: exit $sub_rc, $sub_meshes meshes: $(tail -n 2 <<<"$sub_out" | tr '\n' ';')"
+fi
+
+# --- subscribe-supplementary: a supplementary member of tacmesh gets meshes too -------------
+# SO_PEERCRED reports only the primary group; socket.allow_groups must admit it all the same.
+subscribe tm-supplementary 2
+if [ "$sub_rc" = 0 ] && [ "$sub_meshes" -ge 2 ]; then
+  pass subscribe-supplementary "tm-supplementary ($(id -gn tm-supplementary), also in" \
+    "$(id -Gn tm-supplementary | cut -d ' ' -f 2-)) got $sub_meshes meshes"
+else
+  fail subscribe-supplementary "tm-supplementary ($(id -Gn tm-supplementary)): exit $sub_rc," \
+    "$sub_meshes meshes: $(tail -n 2 <<<"$sub_out" | tr '\n' ';')"
 fi
 
 # --- refuse-outsider: the socket's directory (0750) and file (0660) keep others out ---------

@@ -65,17 +65,22 @@ pub struct PublisherConfig {
 }
 
 /// Which peers may subscribe, by the credentials the kernel reports for the connecting process
-/// (`SO_PEERCRED`: its user id and its primary group id at `connect` time; supplementary
-/// groups are not reported, so list a user's primary group or the user).
+/// (`SO_PEERCRED`: its user id and its primary group id at `connect` time). The kernel does
+/// not report supplementary groups there, so the members of each allowed group (a user added
+/// with `usermod -aG`) are looked up once, at start, and listed in `member_uids`.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct AllowedPeers {
+    /// Users allowed by name or number.
     pub uids: Vec<u32>,
+    /// Primary groups allowed.
     pub gids: Vec<u32>,
+    /// Users who are supplementary members of an allowed group.
+    pub member_uids: Vec<u32>,
 }
 
 impl AllowedPeers {
     pub fn allows(&self, uid: u32, gid: u32) -> bool {
-        self.uids.contains(&uid) || self.gids.contains(&gid)
+        self.uids.contains(&uid) || self.gids.contains(&gid) || self.member_uids.contains(&uid)
     }
 }
 

@@ -390,6 +390,7 @@ fn only_allowed_peers_may_subscribe() {
     let others = AllowedPeers {
         uids: vec![uid.wrapping_add(1)],
         gids: vec![gid.wrapping_add(1)],
+        member_uids: vec![uid.wrapping_add(2)],
     };
     for (name, allowed, admitted) in [
         ("others", others.clone(), false),
@@ -405,6 +406,14 @@ fn only_allowed_peers_may_subscribe() {
             "our gid",
             AllowedPeers {
                 gids: vec![gid],
+                ..others.clone()
+            },
+            true,
+        ),
+        (
+            "a member of an allowed group",
+            AllowedPeers {
+                member_uids: vec![uid],
                 ..others.clone()
             },
             true,

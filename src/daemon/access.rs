@@ -72,8 +72,39 @@ pub fn user_id(principal: &Principal, key: &'static str) -> Result<u32, AccessEr
     }
 }
 
+/// The users listed as members of group `gid` in the group database (`getent group`), whom
+/// `SO_PEERCRED` does not show as being in it. A member name that no longer resolves to a user
+/// is skipped with a warning: a stale `/etc/group` entry must not stop the daemon.
+fn member_uids_of(gid: u32) -> Result<Vec<u32>, AccessError> {
+    let lookup = |source| AccessError::Lookup {
+        key: "socket.allow_groups",
+        kind: "group",
+        name: gid.to_string(),
+        source,
+    };
+    let Some(group) =
+        nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid)).map_err(lookup)?
+    else {
+        return Ok(Vec::new());
+    };
+    let mut uids = Vec::with_capacity(group.mem.len());
+    for name in &group.mem {
+        match nix::unistd::User::from_name(name) {
+            Ok(Some(user)) => uids.push(user.uid.as_raw()),
+            Ok(None) | Err(_) => tracing::warn!(
+                "socket.allow_groups: group {} lists the member {name:?}, who is not a user here; \
+                 skipping it",
+                group.name
+            ),
+        }
+    }
+    Ok(uids)
+}
+
 /// The allow lists, resolved; `None` when neither list is given (anyone the socket file's
-/// mode lets connect may subscribe). An empty list given on purpose admits nobody by it.
+/// mode lets connect may subscribe). An empty list given on purpose admits nobody by it. An
+/// allowed group admits the processes whose primary group it is and the users listed as its
+/// members when the daemon starts (a user added later is admitted after a restart).
 pub fn allowed_peers(
     users: Option<&[Principal]>,
     groups: Option<&[Principal]>,
@@ -86,12 +117,22 @@ pub fn allowed_peers(
         .iter()
         .map(|p| user_id(p, "socket.allow_users"))
         .collect::<Result<_, _>>()?;
-    let gids = groups
+    let gids: Vec<u32> = groups
         .unwrap_or_default()
         .iter()
         .map(|p| group_id(p, "socket.allow_groups"))
         .collect::<Result<_, _>>()?;
-    Ok(Some(AllowedPeers { uids, gids }))
+    let mut member_uids = Vec::new();
+    for &gid in &gids {
+        member_uids.extend(member_uids_of(gid)?);
+    }
+    member_uids.sort_unstable();
+    member_uids.dedup();
+    Ok(Some(AllowedPeers {
+        uids,
+        gids,
+        member_uids,
+    }))
 }
 
 #[cfg(test)]
@@ -110,6 +151,7 @@ mod tests {
             .unwrap();
         assert_eq!(peers.uids, vec![0, 7]);
         assert!(peers.gids.is_empty());
+        assert!(peers.member_uids.is_empty());
         assert_eq!(allowed_peers(None, None).unwrap(), None);
     }
 
@@ -128,5 +170,39 @@ mod tests {
             err.contains("socket.group") && err.contains("group"),
             "{err}"
         );
+    }
+
+    /// A user added to an allowed group as a supplementary member (`usermod -aG`) is admitted,
+    /// although `SO_PEERCRED` reports only the primary group. Checked against this system's
+    /// group database: every group that lists members must admit each of them.
+    #[test]
+    fn supplementary_members_of_an_allowed_group_are_admitted() {
+        let Ok(groups) = std::fs::read_to_string("/etc/group") else {
+            return;
+        };
+        for line in groups.lines() {
+            let fields: Vec<&str> = line.split(':').collect();
+            let [name, _, gid, members] = fields[..] else {
+                continue;
+            };
+            let Ok(gid) = gid.parse::<u32>() else {
+                continue;
+            };
+            let peers = allowed_peers(None, Some(&[Principal::Name(name.into())]))
+                .unwrap()
+                .unwrap();
+            for member in members.split(',').filter(|m| !m.is_empty()) {
+                let Ok(Some(user)) = nix::unistd::User::from_name(member) else {
+                    continue;
+                };
+                let uid = user.uid.as_raw();
+                // Its primary group is some other group: only the membership admits it.
+                let other_gid = gid.wrapping_add(1);
+                assert!(
+                    tacmesh_publish::AllowedPeers::allows(&peers, uid, other_gid),
+                    "{member} (uid {uid}) is a member of {name} but is refused"
+                );
+            }
+        }
     }
 }
