@@ -52,3 +52,29 @@ fn too_few_points_is_a_clear_error() {
     let stderr = stderr_of(&["mesh", path_str(&path), "-o", &out]);
     assert!(stderr.contains("too few"), "{stderr}");
 }
+
+/// Without `$USER` and `$XDG_RUNTIME_DIR` (a cron job, `env -i`, a bare service), the default
+/// socket is named by the numeric user id, which is always known, the same for the daemon
+/// and the client.
+#[test]
+fn default_socket_without_user_or_runtime_dir_is_named_by_uid() {
+    use std::os::unix::fs::MetadataExt;
+    let uid = std::fs::metadata("/proc/self").expect("procfs").uid();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["subscribe", "--count", "0"])
+        .env_remove("USER")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("TMPDIR")
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("the tacmesh binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let expected = format!("/tmp/tacmesh-{uid}.sock");
+    // A daemon of this user may be serving there; then the client connects, prints where and
+    // stops (`--count 0`).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stderr.contains(&expected) || stdout.contains(&expected),
+        "{stderr}{stdout}"
+    );
+}

@@ -13,8 +13,10 @@ use tacmesh::subscriber::Subscription;
 /// age of the data in milliseconds.
 #[derive(Debug, Args)]
 pub struct SubscribeArgs {
-    /// Socket path [default: $XDG_RUNTIME_DIR/tacmesh.sock, as `tacmesh run`]
-    #[arg(long)]
+    /// Socket path [default, as `tacmesh run`: $XDG_RUNTIME_DIR/tacmesh.sock; without a runtime
+    /// directory, /tmp/tacmesh-UID.sock (UID: your numeric user id; $TMPDIR instead of /tmp
+    /// when set)]
+    #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
     /// Write each object's latest mesh to DIR/object-ID.ply (replaced on every update,
     /// deleted when the object is removed)

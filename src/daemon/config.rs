@@ -90,8 +90,8 @@ impl PoseSection {
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SocketSection {
-    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-$USER.sock` in the
-    /// temporary directory when there is no runtime directory.
+    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-UID.sock` (UID: the
+    /// numeric user id) in the temporary directory when there is no runtime directory.
     pub path: Option<PathBuf>,
     /// Permission bits of the socket file, as an octal string. Default `"0660"`.
     pub mode: Option<String>,
@@ -377,16 +377,24 @@ impl DaemonConfig {
 }
 
 /// `$XDG_RUNTIME_DIR/tacmesh.sock` when the runtime directory is set and exists, else
-/// `tacmesh-$USER.sock` in the temporary directory (per user, so two users do not collide).
+/// `tacmesh-UID.sock` in the temporary directory (`$TMPDIR`, else `/tmp`), UID being the
+/// process's numeric user id: per user, so two users do not collide, and the same for the
+/// daemon and `tacmesh subscribe` whatever their environment (`$USER` is often unset under
+/// systemd, cron or `env -i`, and can be set to anything).
 pub fn default_socket_path() -> PathBuf {
-    if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR") {
-        let dir = PathBuf::from(dir);
-        if dir.is_dir() {
-            return dir.join("tacmesh.sock");
-        }
+    default_socket_path_for(
+        std::env::var_os("XDG_RUNTIME_DIR").map(PathBuf::from),
+        &std::env::temp_dir(),
+        nix::unistd::geteuid().as_raw(),
+    )
+}
+
+/// [`default_socket_path`] for a given runtime directory, temporary directory and user id.
+fn default_socket_path_for(runtime_dir: Option<PathBuf>, temp_dir: &Path, uid: u32) -> PathBuf {
+    match runtime_dir {
+        Some(dir) if dir.is_dir() => dir.join("tacmesh.sock"),
+        _ => temp_dir.join(format!("tacmesh-{uid}.sock")),
     }
-    let user = std::env::var("USER").unwrap_or_else(|_| "user".into());
-    std::env::temp_dir().join(format!("tacmesh-{user}.sock"))
 }
 
 /// A tracing-subscriber filter whose every directive names a level: `info`, or
@@ -501,6 +509,23 @@ mod tests {
         let config = parse("[socket]\nmode = \"0600\"\n").unwrap();
         assert_eq!(config.socket_mode().unwrap(), 0o600);
         assert_eq!(DaemonConfig::default().socket_mode().unwrap(), 0o660);
+    }
+
+    #[test]
+    fn default_socket_is_in_the_runtime_dir_else_named_by_uid() {
+        let runtime = tempfile::tempdir().unwrap();
+        let tmp = Path::new("/tmp");
+        assert_eq!(
+            default_socket_path_for(Some(runtime.path().to_owned()), tmp, 1000),
+            runtime.path().join("tacmesh.sock")
+        );
+        let gone = runtime.path().join("gone");
+        for runtime_dir in [None, Some(gone)] {
+            assert_eq!(
+                default_socket_path_for(runtime_dir, tmp, 1000),
+                Path::new("/tmp/tacmesh-1000.sock")
+            );
+        }
     }
 
     #[test]
