@@ -42,8 +42,9 @@ impl Default for DaemonConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct SensorSection {
     /// Which backend and device, by prefix (see `tacmesh run --help`): `sim`, `sim:SCENE.toml`,
-    /// `replay:PATH` (.oni, .bag, a folder or list of depth images or clouds),
-    /// `serial:camsense:PORT`, `serial:rplidar:PORT`. Default `sim`.
+    /// `replay:PATH` (.oni, .bag, depth images or clouds), `serial:camsense:PORT`,
+    /// `serial:rplidar:PORT`, `v4l2:/dev/videoN?…`, `openni2:[URI]`, `depthai:[…]`.
+    /// Default `sim`.
     pub spec: String,
     /// Pacing: `true` delivers frames at the sensor's (or recording's) rate of wall-clock time,
     /// `false` as fast as the pipeline takes them. Default: the source's own choice (real time).
