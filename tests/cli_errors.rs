@@ -78,3 +78,25 @@ fn default_socket_without_user_or_runtime_dir_is_named_by_uid() {
         "{stderr}{stdout}"
     );
 }
+
+/// Each cause is said once: an error whose message includes its cause does not also hand it
+/// on as a source, which `main`'s chain printer would print a second time
+/// ("… (os error 2): No such file or directory (os error 2)").
+#[test]
+fn a_missing_file_or_daemon_is_said_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let socket = dir.path().join("nobody.sock");
+    let scene = format!("sim:{}", dir.path().join("nope.toml").display());
+    for args in [
+        vec!["run", "--config", "/nonexistent/tacmesh.toml"],
+        vec!["run", "--sensor", &scene, "--duration-s", "0"],
+        vec!["subscribe", "--socket", path_str(&socket)],
+    ] {
+        let stderr = stderr_of(&args);
+        assert_eq!(
+            stderr.matches("os error 2").count(),
+            1,
+            "tacmesh {args:?}: {stderr}"
+        );
+    }
+}

@@ -47,6 +47,8 @@ use notify::{Heartbeat, Heartbeats, Notifier, SystemdFeed};
 use perception::Perception;
 
 /// Why the daemon could not start.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
     #[error(transparent)]
@@ -56,12 +58,14 @@ pub enum DaemonError {
     Sensor(#[from] Box<SensorError>),
     #[error(transparent)]
     Publish(#[from] PublishError),
+    /// Not `#[from]`: that would make the message's `{0}` a source too, printed twice by an
+    /// error chain printer.
     #[error("config [track]: {0}")]
-    Track(#[from] tacmesh_track::TrackError),
-    #[error("cannot start the {name} thread: {source}")]
+    Track(tacmesh_track::TrackError),
+    #[error("cannot start the {name} thread: {cause}")]
     Spawn {
         name: &'static str,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
@@ -135,7 +139,8 @@ impl Daemon {
     /// claimed.
     pub fn start(config: DaemonConfig) -> Result<Daemon, DaemonError> {
         config.validate()?;
-        let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))?;
+        let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))
+            .map_err(DaemonError::Track)?;
         // Every sensor is opened before anything starts, so that a wrong spec, a missing file or
         // a backend not built fails the start. A device that is not there (yet) does not: the
         // daemon serves without it and its supervisor keeps trying to open it, with backoff.
@@ -190,7 +195,7 @@ impl Daemon {
             std::thread::Builder::new()
                 .name(name.into())
                 .spawn(body)
-                .map_err(|source| DaemonError::Spawn { name, source })
+                .map_err(|cause| DaemonError::Spawn { name, cause })
         };
         for _ in 0..shared.config.mesh.workers {
             let s = Arc::clone(&shared);

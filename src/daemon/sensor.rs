@@ -206,6 +206,8 @@ impl V4l2Spec {
 }
 
 /// Why a sensor could not be opened.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum SensorError {
     #[error(
@@ -227,10 +229,10 @@ pub enum SensorError {
     BadOption { spec: String, reason: String },
     #[error(transparent)]
     SceneFile(#[from] tacmesh_sim::SceneFileError),
-    #[error("the simulated camera of {name} cannot be built: {source}")]
+    #[error("the simulated camera of {name} cannot be built: {cause}")]
     Camera {
         name: String,
-        source: tacmesh_sim::DepthCameraError,
+        cause: tacmesh_sim::DepthCameraError,
     },
     #[error(transparent)]
     Oni(#[from] tacmesh_oni::OniError),
@@ -334,7 +336,7 @@ impl SensorSpec {
                 let name = scene.name.clone();
                 let mut camera = scene
                     .into_camera()
-                    .map_err(|source| SensorError::Camera { name, source })?;
+                    .map_err(|cause| SensorError::Camera { name, cause })?;
                 if let Some(paced) = section.paced {
                     camera.set_paced(paced);
                 }
