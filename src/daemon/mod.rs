@@ -27,7 +27,7 @@ mod perception;
 pub mod planes;
 pub mod sensor;
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -118,6 +118,18 @@ pub(crate) struct Shared {
     mesh_queue: MeshQueue,
     publisher: Publisher,
     source_stop: AtomicBool,
+    /// Sources whose stream ended (a recording played once). When every configured sensor's
+    /// has, the perception thread meshes what was held back ([`perception`]).
+    streams_ended: AtomicUsize,
+    /// Set by the perception thread once it has handed out those last jobs.
+    end_of_stream_flushed: AtomicBool,
+}
+
+impl Shared {
+    /// Whether every sensor's stream has ended, so that no frame will come again.
+    fn every_stream_ended(&self) -> bool {
+        self.streams_ended.load(Ordering::Acquire) >= self.config.sensor.len()
+    }
 }
 
 /// A running daemon.
@@ -181,6 +193,8 @@ impl Daemon {
             mesh_queue: MeshQueue::default(),
             publisher,
             source_stop: AtomicBool::new(false),
+            streams_ended: AtomicUsize::new(0),
+            end_of_stream_flushed: AtomicBool::new(false),
         });
         let mut daemon = Daemon {
             shared: Arc::clone(&shared),
@@ -280,6 +294,7 @@ impl Daemon {
             // Recordings end; the daemon keeps serving their last meshes until it is stopped.
             if !said_ended
                 && self.sources.iter().all(|s| s.is_finished())
+                && self.shared.end_of_stream_flushed.load(Ordering::Acquire)
                 && self.shared.ring.stats().queued == 0
                 && self.shared.mesh_queue.is_empty()
             {
@@ -465,6 +480,9 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, source: Option<Box<dyn De
             }
             Err(SourceError::EndOfStream { device }) => {
                 tracing::info!("{device} has no more frames");
+                // After its last frame is in the ring: the perception thread flushes only
+                // once the ring is empty too.
+                shared.streams_ended.fetch_add(1, Ordering::AcqRel);
                 break;
             }
             Err(err @ SourceError::Malformed { .. }) => {
@@ -537,6 +555,8 @@ mod tests {
             mesh_queue: MeshQueue::default(),
             publisher: Publisher::bind(PublisherConfig::new(dir.join("t.sock"))).unwrap(),
             source_stop: AtomicBool::new(false),
+            streams_ended: AtomicUsize::new(0),
+            end_of_stream_flushed: AtomicBool::new(false),
             config,
         }
     }
