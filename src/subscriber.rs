@@ -10,23 +10,25 @@ use std::time::Duration;
 use tacmesh_protocol::{check_hello, encode, FrameDecoder, Message, Sender, WireError};
 
 /// Why a subscription failed.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum SubscribeError {
     #[error(
-        "cannot connect to {}: {source}; is `tacmesh run` running with this --socket?",
+        "cannot connect to {}: {cause}; is `tacmesh run` running with this --socket?",
         path.display()
     )]
     Connect {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("reading from {}: {source}", path.display())]
+    #[error("reading from {}: {cause}", path.display())]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("the daemon on {} sent something unreadable: {source}", path.display())]
-    Wire { path: PathBuf, source: WireError },
+    #[error("the daemon on {} sent something unreadable: {cause}", path.display())]
+    Wire { path: PathBuf, cause: WireError },
     #[error("the daemon on {} closed the connection", path.display())]
     Closed { path: PathBuf },
 }
@@ -45,9 +47,9 @@ impl Subscription {
     /// Connects, sends Subscribe and reads the Hello (refusing another protocol version).
     /// `read_timeout` bounds each wait for data (`None`: wait for ever).
     pub fn connect(path: &Path, read_timeout: Option<Duration>) -> Result<Self, SubscribeError> {
-        let connect_err = |source| SubscribeError::Connect {
+        let connect_err = |cause| SubscribeError::Connect {
             path: path.to_owned(),
-            source,
+            cause,
         };
         let mut stream = UnixStream::connect(path).map_err(connect_err)?;
         stream.set_read_timeout(read_timeout).map_err(connect_err)?;
@@ -64,9 +66,9 @@ impl Subscription {
             server: String::new(),
         };
         let first = subscription.next_message()?;
-        check_hello(&first).map_err(|source| SubscribeError::Wire {
+        check_hello(&first).map_err(|cause| SubscribeError::Wire {
             path: path.to_owned(),
-            source,
+            cause,
         })?;
         if let Message::Hello { server, .. } = first {
             subscription.server = server;
@@ -80,19 +82,19 @@ impl Subscription {
             match self.decoder.next_message() {
                 Ok(Some(message)) => return Ok(message),
                 Ok(None) => {}
-                Err(source) => {
+                Err(cause) => {
                     return Err(SubscribeError::Wire {
                         path: self.path.clone(),
-                        source,
+                        cause,
                     })
                 }
             }
             let n = self
                 .stream
                 .read(&mut self.buffer)
-                .map_err(|source| SubscribeError::Read {
+                .map_err(|cause| SubscribeError::Read {
                     path: self.path.clone(),
-                    source,
+                    cause,
                 })?;
             if n == 0 {
                 return Err(SubscribeError::Closed {

@@ -73,3 +73,51 @@ fn a_closed_stdout_is_an_error_not_a_panic() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// Without `$USER` and `$XDG_RUNTIME_DIR` (a cron job, `env -i`, a bare service), the default
+/// socket is named by the numeric user id, which is always known, the same for the daemon
+/// and the client.
+#[test]
+fn default_socket_without_user_or_runtime_dir_is_named_by_uid() {
+    use std::os::unix::fs::MetadataExt;
+    let uid = std::fs::metadata("/proc/self").expect("procfs").uid();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+        .args(["subscribe", "--count", "0"])
+        .env_remove("USER")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("TMPDIR")
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("the tacmesh binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let expected = format!("/tmp/tacmesh-{uid}.sock");
+    // A daemon of this user may be serving there; then the client connects, prints where and
+    // stops (`--count 0`).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stderr.contains(&expected) || stdout.contains(&expected),
+        "{stderr}{stdout}"
+    );
+}
+
+/// Each cause is said once: an error whose message includes its cause does not also hand it
+/// on as a source, which `main`'s chain printer would print a second time
+/// ("… (os error 2): No such file or directory (os error 2)").
+#[test]
+fn a_missing_file_or_daemon_is_said_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let socket = dir.path().join("nobody.sock");
+    let scene = format!("sim:{}", dir.path().join("nope.toml").display());
+    for args in [
+        vec!["run", "--config", "/nonexistent/tacmesh.toml"],
+        vec!["run", "--sensor", &scene, "--duration-s", "0"],
+        vec!["subscribe", "--socket", path_str(&socket)],
+    ] {
+        let stderr = stderr_of(&args);
+        assert_eq!(
+            stderr.matches("os error 2").count(),
+            1,
+            "tacmesh {args:?}: {stderr}"
+        );
+    }
+}

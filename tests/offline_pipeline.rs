@@ -69,3 +69,42 @@ fn torus_at_20mm_noise_beats_table1() {
     assert!(faces <= 134, "torus faces {faces}");
     assert!(mhe <= 0.0143, "torus MHE {mhe}");
 }
+
+/// The README's offline example runs as written (with this build's binary for `cargo run
+/// --release -q --`) and leaves no file in the folder it is run from, the repository root for
+/// a reader following the README.
+#[test]
+fn readme_offline_example_runs_and_leaves_no_files_behind() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).expect("README");
+    let section = readme
+        .split("## The offline pipeline")
+        .nth(1)
+        .expect("an offline pipeline section");
+    let example = section
+        .split("```sh\n")
+        .nth(1)
+        .and_then(|block| block.split("```").next())
+        .expect("a shell example");
+    assert!(example.contains("cargo run --release -q --"), "{example}");
+    let script = example.replace(
+        "cargo run --release -q --",
+        &format!("'{}'", env!("CARGO_BIN_EXE_tacmesh")),
+    );
+    let cwd = tempfile::tempdir().expect("temp dir");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let out = std::process::Command::new("sh")
+        .args(["-c", &script])
+        .current_dir(cwd.path())
+        .env("TMPDIR", tmp.path())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("sh runs");
+    assert!(
+        out.status.success(),
+        "{script}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let left: Vec<_> = std::fs::read_dir(cwd.path()).expect("lists").collect();
+    assert!(left.is_empty(), "the example left {left:?} behind");
+}

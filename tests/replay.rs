@@ -1,7 +1,9 @@
 //! Real recordings through the live daemon: each plays through `tacmesh run --sensor
 //! replay:…` into published object meshes (looped, so that objects are seen in enough frames
-//! to be confirmed; the bag holds only two depth frames).
+//! to be confirmed; the bag holds only two depth frames), and a recording played once is
+//! meshed at its end.
 
+use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -11,18 +13,29 @@ use tacmesh::subscriber::Subscription;
 use crate::daemon::ONE_DAEMON_AT_A_TIME;
 use crate::util::test_data;
 
-/// Runs the daemon on `spec` until a subscriber has an object mesh; returns its face count.
+/// Runs the daemon on `spec`, looped, until a subscriber has an object mesh; returns its face
+/// count.
 fn first_object_mesh(spec: &str) -> usize {
+    first_object_mesh_and_log(spec, &["--loop"], "warn").0
+}
+
+/// Runs `tacmesh run --sensor SPEC OPTIONS` until a subscriber has an object mesh; returns its
+/// face count and the daemon's log at `level` (read once the daemon is stopped, so keep it
+/// short: a full pipe would stall the daemon).
+fn first_object_mesh_and_log(spec: &str, options: &[&str], level: &str) -> (usize, String) {
     let _one = ONE_DAEMON_AT_A_TIME
         .lock()
         .unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().expect("a temporary folder");
     let socket = dir.path().join("replay.sock");
     let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
-        .args(["run", "--loop", "--sensor", spec, "--socket"])
+        .args(["run", "--sensor", spec])
+        .args(options)
+        .arg("--socket")
         .arg(&socket)
-        .env("RUST_LOG", "warn")
+        .env("RUST_LOG", level)
         .stdout(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .expect("tacmesh runs");
     let started = Instant::now();
@@ -53,11 +66,28 @@ fn first_object_mesh(spec: &str) -> usize {
     };
     let _ = child.kill();
     let _ = child.wait();
-    faces
+    let mut log = String::new();
+    if let Some(mut stderr) = child.stderr.take() {
+        let _ = stderr.read_to_string(&mut log);
+    }
+    (faces, log)
 }
 
 fn path(relative: &str) -> String {
     test_data(relative).display().to_string()
+}
+
+/// One range scan played once (no `--loop`): its objects are seen in one frame only, fewer
+/// than confirm an object, yet the daemon meshes them when the stream ends, and says so.
+#[test]
+fn a_one_shot_cloud_is_meshed_at_its_end() {
+    let spec = format!("replay:{}", path("pointclouds/stanford_bunny/bun000.ply"));
+    let (faces, log) = first_object_mesh_and_log(&spec, &[], "info");
+    assert!(faces > 0);
+    assert!(
+        log.contains("end of stream after 1 frame: meshing what was held back"),
+        "{log}"
+    );
 }
 
 #[test]

@@ -3,6 +3,7 @@
 mod util;
 
 mod cli_errors;
+mod cli_help;
 mod daemon;
 mod offline_pipeline;
 mod real_scans;

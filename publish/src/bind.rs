@@ -34,7 +34,7 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
         },
         _ => PublishError::Bind {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         },
     })?;
     let file_id = file_id(path);
@@ -43,7 +43,7 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
         return Err(PublishError::SetMode {
             path: path.to_path_buf(),
             mode,
-            source,
+            cause: source,
         });
     }
     if let Some(gid) = group {
@@ -52,7 +52,7 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
             return Err(PublishError::SetGroup {
                 path: path.to_path_buf(),
                 gid,
-                source,
+                cause: source,
             });
         }
     }
@@ -67,7 +67,7 @@ fn clear_stale(path: &Path) -> Result<(), PublishError> {
         Err(source) => {
             return Err(PublishError::Probe {
                 path: path.to_path_buf(),
-                source,
+                cause: source,
             })
         }
     };
@@ -83,7 +83,7 @@ fn clear_stale(path: &Path) -> Result<(), PublishError> {
         Err(error) if error.kind() == ErrorKind::ConnectionRefused => {
             std::fs::remove_file(path).map_err(|source| PublishError::RemoveStale {
                 path: path.to_path_buf(),
-                source,
+                cause: source,
             })?;
             tracing::info!(
                 "removed the stale socket {} left by a daemon that is no longer running",
@@ -93,7 +93,7 @@ fn clear_stale(path: &Path) -> Result<(), PublishError> {
         }
         Err(source) => Err(PublishError::Probe {
             path: path.to_path_buf(),
-            source,
+            cause: source,
         }),
     }
 }

@@ -116,6 +116,8 @@ pub struct PublisherCounters {
 }
 
 /// Everything that can go wrong when publishing, said so that the operator knows what to do.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum PublishError {
@@ -136,61 +138,61 @@ pub enum PublishError {
     NoSocketDir { dir: PathBuf },
 
     #[error(
-        "cannot check whether a daemon serves {}: {source}; check the permissions of the \
+        "cannot check whether a daemon serves {}: {cause}; check the permissions of the \
          path or choose another --socket",
         path.display()
     )]
     Probe {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 
     #[error(
-        "cannot remove the stale socket {}: {source}; remove it yourself or choose another \
+        "cannot remove the stale socket {}: {cause}; remove it yourself or choose another \
          --socket",
         path.display()
     )]
     RemoveStale {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 
     #[error(
-        "cannot bind the socket {}: {source}; check that its directory is writable and the \
+        "cannot bind the socket {}: {cause}; check that its directory is writable and the \
          path is shorter than 108 bytes",
         path.display()
     )]
     Bind {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 
-    #[error("cannot set mode {mode:04o} on the socket {}: {source}", path.display())]
+    #[error("cannot set mode {mode:04o} on the socket {}: {cause}", path.display())]
     SetMode {
         path: PathBuf,
         mode: u32,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 
     #[error(
-        "cannot give the socket {} to group {gid}: {source}; the daemon's user must be a \
+        "cannot give the socket {} to group {gid}: {cause}; the daemon's user must be a \
          member of that group",
         path.display()
     )]
     SetGroup {
         path: PathBuf,
         gid: u32,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 
     #[error("socket mode {mode:o} is not a set of permission bits: give a mode such as 0o660")]
     InvalidMode { mode: u32 },
 
-    #[error("server name {name:?} cannot be sent in a Hello: {source}")]
-    ServerName { name: String, source: WireError },
+    #[error("server name {name:?} cannot be sent in a Hello: {cause}")]
+    ServerName { name: String, cause: WireError },
 
-    #[error("cannot start the publisher's accept thread: {source}")]
-    Spawn { source: std::io::Error },
+    #[error("cannot start the publisher's accept thread: {cause}")]
+    Spawn { cause: std::io::Error },
 
     #[error(
         "object {object_id}: version {version} is not newer than the published version \
@@ -202,11 +204,11 @@ pub enum PublishError {
         current: u64,
     },
 
-    #[error("the mesh of object {object_id} cannot be published: {source}")]
-    EncodeUpsert { object_id: u64, source: WireError },
+    #[error("the mesh of object {object_id} cannot be published: {cause}")]
+    EncodeUpsert { object_id: u64, cause: WireError },
 
-    #[error("the stats cannot be published: {source}")]
-    EncodeStats { source: WireError },
+    #[error("the stats cannot be published: {cause}")]
+    EncodeStats { cause: WireError },
 }
 
 /// State shared by the publisher handle, the accept thread and every subscriber's threads.
@@ -279,7 +281,7 @@ impl Publisher {
         encode(&Message::hello(config.server_name.as_str()), &mut hello).map_err(|source| {
             PublishError::ServerName {
                 name: config.server_name.clone(),
-                source,
+                cause: source,
             }
         })?;
         let bound = bind::claim(&config.socket_path, config.mode, config.group)?;
@@ -302,7 +304,7 @@ impl Publisher {
             Ok(handle) => handle,
             Err(source) => {
                 bind::remove_if_ours(&config.socket_path, bound.file_id);
-                return Err(PublishError::Spawn { source });
+                return Err(PublishError::Spawn { cause: source });
             }
         };
         tracing::info!(
@@ -343,8 +345,12 @@ impl Publisher {
             }
         }
         let mut bytes = Vec::new();
-        encode(&Message::Upsert(upsert), &mut bytes)
-            .map_err(|source| PublishError::EncodeUpsert { object_id, source })?;
+        encode(&Message::Upsert(upsert), &mut bytes).map_err(|source| {
+            PublishError::EncodeUpsert {
+                object_id,
+                cause: source,
+            }
+        })?;
         let frame = Arc::new(Frame { version, bytes });
 
         let mut state = lock(&self.shared.state);
@@ -383,7 +389,7 @@ impl Publisher {
     pub fn stats(&self, stats: Stats) -> Result<(), PublishError> {
         let mut bytes = Vec::new();
         encode(&Message::Stats(stats), &mut bytes)
-            .map_err(|source| PublishError::EncodeStats { source })?;
+            .map_err(|source| PublishError::EncodeStats { cause: source })?;
         let frame = Arc::new(bytes);
         let state = lock(&self.shared.state);
         for client in state.clients.values() {

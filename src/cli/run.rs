@@ -4,36 +4,66 @@ use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::{Daemon, DaemonConfig, StopSignal};
 
+/// `--sensor` in `--help`: every spec the parser takes (`SpecKind::ALL`; a test checks that
+/// each of its prefixes is here).
+const SENSOR_HELP: &str = "\
+A sensor, repeatable (all feed one object map); replaces the config file's [[sensor]] list.
+SPEC is one of:
+  sim | sim:demo        the simulated demo scene
+  sim:SCENE.toml        a simulated camera over a scene file (see scenes/)
+  replay:FILE.oni       an OpenNI recording
+  replay:FILE.bag       a RealSense ROS bag
+  replay:PATH?fx=…&fy=…&cx=…&cy=…[&depth_scale_m=0.001&rate=recorded|max|FPS]
+                        depth images (16-bit PNG, TIFF, PGM, Z16): one file, a folder or a
+                        TUM depth.txt; the intrinsics are required
+  replay:PATH           point clouds (PLY, PCD, XYZ): one file or a folder
+  serial:camsense:PORT  a Camsense X1-style 360° scanner
+  serial:rplidar:PORT[@BAUD]
+                        an RPLIDAR A1/A2 (115200 baud; an A3: @256000)
+  v4l2:/dev/videoN?fx=…&fy=…&cx=…&cy=…[&width=640&height=480&fps=30&depth_scale_m=0.001]
+                        a V4L2 depth camera (Z16/Y16); build with --features v4l2
+  openni2:[URI]         a Kinect, Xtion or Orbbec through OpenNI2: the first one found, a
+                        device URI or an .oni file; build with --features openni2
+  depthai:[DEVICE][?width=…&height=…&fps=…&align=…&preset=…&record=FILE.mcap&venv=DIR]
+                        a Luxonis OAK camera: the first one found, or by id or IP; build
+                        with --features depthai
+  depthai:FILE.mcap[?rate=max&venv=DIR]
+                        a DepthAI recording (same feature)";
+
 /// Run the daemon: read a depth sensor, keep a small mesh of every object in view, and serve
 /// the meshes on a Unix socket.
 ///
 /// With no options it runs the simulated demo scene (a table with objects that stand, move,
-/// appear and leave) and serves on $XDG_RUNTIME_DIR/tacmesh.sock (or a file in the temporary
-/// directory). Watch it from another terminal with `tacmesh subscribe`. Stop it with Ctrl-C or
-/// SIGTERM.
+/// appear and leave) and serves on $XDG_RUNTIME_DIR/tacmesh.sock (without a runtime directory,
+/// /tmp/tacmesh-UID.sock, UID being your numeric user id). Watch it from another terminal with
+/// `tacmesh subscribe`. Stop it with Ctrl-C or SIGTERM.
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// Config file (TOML; see tacmesh.example.toml). Options given here override it.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// A sensor, repeatable (all feed one object map): `sim` (the demo scene),
-    /// `sim:SCENE.toml` (a scene file, see scenes/), `replay:FILE.oni` (OpenNI recording),
-    /// `replay:FILE.bag` (RealSense ROS bag), `serial:camsense:PORT`,
-    /// `serial:rplidar:PORT[@BAUD]`. Replaces the config file's [[sensor]] list
-    #[arg(long)]
+    #[arg(
+        long,
+        value_name = "SPEC",
+        help = "A sensor, repeatable (all feed one object map): sim, sim:SCENE.toml, \
+                replay:PATH, serial:…, v4l2:…, openni2:…, depthai:…; --help lists them",
+        long_help = SENSOR_HELP
+    )]
     sensor: Vec<String>,
-    /// Recordings: start again at the end instead of stopping
+    /// Recordings: start again at the end instead of stopping. Without it a recording plays
+    /// once, and what it showed is meshed when it ends
     #[arg(long = "loop")]
     looping: bool,
-    /// Socket path [default: $XDG_RUNTIME_DIR/tacmesh.sock]
-    #[arg(long)]
+    /// Socket path [default: $XDG_RUNTIME_DIR/tacmesh.sock; without a runtime directory,
+    /// /tmp/tacmesh-UID.sock (UID: your numeric user id; $TMPDIR instead of /tmp when set)]
+    #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
-    /// Take frames as fast as the pipeline consumes them instead of at the sensor's rate
-    /// (simulated sensors only)
+    /// Recordings and simulated sensors: take frames as fast as the pipeline consumes them
+    /// instead of at the recorded (or simulated) rate. Live devices keep their own rate
     #[arg(long)]
     unpaced: bool,
     /// Stop after this many seconds (for benchmarks and scripted runs)
-    #[arg(long)]
+    #[arg(long, value_name = "S")]
     duration_s: Option<f64>,
 }
 

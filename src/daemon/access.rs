@@ -15,6 +15,8 @@ pub enum Principal {
 }
 
 /// Why a user or group named in the config cannot be used.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum AccessError {
     #[error("config: {key}: there is no {kind} {name:?} on this system")]
@@ -23,12 +25,12 @@ pub enum AccessError {
         kind: &'static str,
         name: String,
     },
-    #[error("config: {key}: cannot look up the {kind} {name:?}: {source}")]
+    #[error("config: {key}: cannot look up the {kind} {name:?}: {cause}")]
     Lookup {
         key: &'static str,
         kind: &'static str,
         name: String,
-        source: nix::Error,
+        cause: nix::Error,
     },
 }
 
@@ -37,11 +39,11 @@ pub fn group_id(principal: &Principal, key: &'static str) -> Result<u32, AccessE
     match principal {
         Principal::Id(id) => Ok(*id),
         Principal::Name(name) => nix::unistd::Group::from_name(name)
-            .map_err(|source| AccessError::Lookup {
+            .map_err(|cause| AccessError::Lookup {
                 key,
                 kind: "group",
                 name: name.clone(),
-                source,
+                cause,
             })?
             .map(|group| group.gid.as_raw())
             .ok_or_else(|| AccessError::Unknown {
@@ -57,11 +59,11 @@ pub fn user_id(principal: &Principal, key: &'static str) -> Result<u32, AccessEr
     match principal {
         Principal::Id(id) => Ok(*id),
         Principal::Name(name) => nix::unistd::User::from_name(name)
-            .map_err(|source| AccessError::Lookup {
+            .map_err(|cause| AccessError::Lookup {
                 key,
                 kind: "user",
                 name: name.clone(),
-                source,
+                cause,
             })?
             .map(|user| user.uid.as_raw())
             .ok_or_else(|| AccessError::Unknown {
@@ -76,11 +78,11 @@ pub fn user_id(principal: &Principal, key: &'static str) -> Result<u32, AccessEr
 /// `SO_PEERCRED` does not show as being in it. A member name that no longer resolves to a user
 /// is skipped with a warning: a stale `/etc/group` entry must not stop the daemon.
 fn member_uids_of(gid: u32) -> Result<Vec<u32>, AccessError> {
-    let lookup = |source| AccessError::Lookup {
+    let lookup = |cause| AccessError::Lookup {
         key: "socket.allow_groups",
         kind: "group",
         name: gid.to_string(),
-        source,
+        cause,
     };
     let Some(group) =
         nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid)).map_err(lookup)?

@@ -42,8 +42,9 @@ impl Default for DaemonConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct SensorSection {
     /// Which backend and device, by prefix (see `tacmesh run --help`): `sim`, `sim:SCENE.toml`,
-    /// `replay:PATH` (.oni, .bag, a folder or list of depth images or clouds),
-    /// `serial:camsense:PORT`, `serial:rplidar:PORT`. Default `sim`.
+    /// `replay:PATH` (.oni, .bag, depth images or clouds), `serial:camsense:PORT`,
+    /// `serial:rplidar:PORT`, `v4l2:/dev/videoN?…`, `openni2:[URI]`, `depthai:[…]`.
+    /// Default `sim`.
     pub spec: String,
     /// Pacing: `true` delivers frames at the sensor's (or recording's) rate of wall-clock time,
     /// `false` as fast as the pipeline takes them. Default: the source's own choice (real time).
@@ -90,8 +91,8 @@ impl PoseSection {
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SocketSection {
-    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-$USER.sock` in the
-    /// temporary directory when there is no runtime directory.
+    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-UID.sock` (UID: the
+    /// numeric user id) in the temporary directory when there is no runtime directory.
     pub path: Option<PathBuf>,
     /// Permission bits of the socket file, as an octal string. Default `"0660"`.
     pub mode: Option<String>,
@@ -217,12 +218,14 @@ impl Default for LogSection {
 }
 
 /// A configuration that cannot be used; the daemon stops before it starts anything.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error("cannot read the config file {}: {source}", path.display())]
+    #[error("cannot read the config file {}: {cause}", path.display())]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("config file {}: {message}", path.display())]
     Parse { path: PathBuf, message: String },
@@ -232,6 +235,12 @@ pub enum ConfigError {
         value: String,
         expected: &'static str,
     },
+    #[error(
+        "config: socket.mode = {value} is world-writable, which would let every local user \
+         connect, read every mesh and flood the daemon; use \"0660\" with socket.group (or \
+         socket.allow_users / socket.allow_groups) to choose who may subscribe"
+    )]
+    WorldWritable { value: String },
     #[error(transparent)]
     Access(#[from] AccessError),
 }
@@ -239,9 +248,9 @@ pub enum ConfigError {
 impl DaemonConfig {
     /// Reads and checks a config file.
     pub fn load(path: &Path) -> Result<DaemonConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = std::fs::read_to_string(path).map_err(|cause| ConfigError::Read {
             path: path.to_owned(),
-            source,
+            cause,
         })?;
         Self::parse(&text, path)
     }
@@ -331,13 +340,18 @@ impl DaemonConfig {
         Ok(())
     }
 
-    /// The socket file mode: `socket.mode` parsed as octal, or 0660.
+    /// The socket file mode: `socket.mode` parsed as octal, or 0660. A world-writable mode is
+    /// refused: connecting to a Unix socket needs write permission on it, so o+w would let any
+    /// local user subscribe, past the access lists' intent.
     pub fn socket_mode(&self) -> Result<u32, ConfigError> {
         let Some(text) = &self.socket.mode else {
             return Ok(tacmesh_publish::DEFAULT_SOCKET_MODE);
         };
         let digits = text.trim_start_matches("0o");
         match u32::from_str_radix(digits, 8) {
+            Ok(mode) if mode & 0o002 != 0 && mode <= 0o777 => Err(ConfigError::WorldWritable {
+                value: format!("{text:?}"),
+            }),
             Ok(mode) if mode <= 0o777 => Ok(mode),
             _ => Err(ConfigError::OutOfRange {
                 key: "socket.mode",
@@ -377,16 +391,24 @@ impl DaemonConfig {
 }
 
 /// `$XDG_RUNTIME_DIR/tacmesh.sock` when the runtime directory is set and exists, else
-/// `tacmesh-$USER.sock` in the temporary directory (per user, so two users do not collide).
+/// `tacmesh-UID.sock` in the temporary directory (`$TMPDIR`, else `/tmp`), UID being the
+/// process's numeric user id: per user, so two users do not collide, and the same for the
+/// daemon and `tacmesh subscribe` whatever their environment (`$USER` is often unset under
+/// systemd, cron or `env -i`, and can be set to anything).
 pub fn default_socket_path() -> PathBuf {
-    if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR") {
-        let dir = PathBuf::from(dir);
-        if dir.is_dir() {
-            return dir.join("tacmesh.sock");
-        }
+    default_socket_path_for(
+        std::env::var_os("XDG_RUNTIME_DIR").map(PathBuf::from),
+        &std::env::temp_dir(),
+        nix::unistd::geteuid().as_raw(),
+    )
+}
+
+/// [`default_socket_path`] for a given runtime directory, temporary directory and user id.
+fn default_socket_path_for(runtime_dir: Option<PathBuf>, temp_dir: &Path, uid: u32) -> PathBuf {
+    match runtime_dir {
+        Some(dir) if dir.is_dir() => dir.join("tacmesh.sock"),
+        _ => temp_dir.join(format!("tacmesh-{uid}.sock")),
     }
-    let user = std::env::var("USER").unwrap_or_else(|_| "user".into());
-    std::env::temp_dir().join(format!("tacmesh-{user}.sock"))
 }
 
 /// A tracing-subscriber filter whose every directive names a level: `info`, or
@@ -402,16 +424,191 @@ fn is_log_filter(text: &str) -> bool {
     directives_name_levels && tracing_subscriber::EnvFilter::try_new(text).is_ok()
 }
 
-/// The toml crate's message with the line number it points at, in one line.
+/// What each key wants, in words, for errors about a value of the wrong type or size (serde's
+/// own words are Rust types: `expected f32`). Keyed by the dotted path without array indices.
+const KEY_WANTS: &[(&str, &str)] = &[
+    (
+        "sensor",
+        "one [[sensor]] table per sensor, each with a `spec`",
+    ),
+    (
+        "sensor.spec",
+        "a sensor spec string, for example \"sim\" or \"replay:scan.oni\" (see `tacmesh run --help`)",
+    ),
+    ("sensor.paced", "true or false"),
+    ("sensor.loop", "true or false"),
+    (
+        "sensor.pose",
+        "a table such as { translation_m = [0.0, 0.0, 1.2], rotation_deg = [-120.0, 0.0, 0.0] }",
+    ),
+    (
+        "sensor.pose.translation_m",
+        "three lengths in metres, [x, y, z], for example [0.0, 0.0, 1.2]",
+    ),
+    (
+        "sensor.pose.rotation_deg",
+        "three angles in degrees, [roll, pitch, yaw], for example [-120.0, 0.0, 0.0]",
+    ),
+    (
+        "socket.path",
+        "a file path string, for example \"/run/tacmesh/tacmesh.sock\"",
+    ),
+    (
+        "socket.mode",
+        "an octal permission string, for example \"0660\"",
+    ),
+    (
+        "socket.group",
+        "a group name or number, for example \"robot\" or 1001",
+    ),
+    (
+        "socket.allow_users",
+        "a list of user names or numbers, for example [\"operator\", 1001]",
+    ),
+    (
+        "socket.allow_groups",
+        "a list of group names or numbers, for example [\"teleop\", 1001]",
+    ),
+    (
+        "pipeline.ring_capacity",
+        "a whole number of frames from 1 to 64, for example 1",
+    ),
+    (
+        "pipeline.max_range_m",
+        "a distance in metres, for example 4.0",
+    ),
+    (
+        "pipeline.segment_stride",
+        "a whole number of pixels from 1 to 16, for example 2",
+    ),
+    (
+        "track.voxel_size_m",
+        "a length in metres, for example 0.005",
+    ),
+    (
+        "track.leave_after_s",
+        "a time in seconds, for example 1.0",
+    ),
+    (
+        "track.remesh_interval_s",
+        "a time in seconds, for example 0.25",
+    ),
+    (
+        "mesh.max_residual_m",
+        "a length in metres, for example 0.004",
+    ),
+    ("mesh.fit_to_data", "true or false"),
+    (
+        "mesh.workers",
+        "a whole number of threads from 1 to 16, for example 2",
+    ),
+    (
+        "stats.publish_interval_s",
+        "a time in seconds, for example 1.0",
+    ),
+    (
+        "stats.log_interval_s",
+        "a time in seconds, for example 10.0",
+    ),
+    (
+        "log.level",
+        "a level or filter string, for example \"info\" or \"info,tacmesh::daemon=debug\"",
+    ),
+    ("socket", "a [socket] table (see tacmesh.example.toml)"),
+    ("pipeline", "a [pipeline] table (see tacmesh.example.toml)"),
+    ("track", "a [track] table (see tacmesh.example.toml)"),
+    ("mesh", "a [mesh] table (see tacmesh.example.toml)"),
+    ("stats", "a [stats] table (see tacmesh.example.toml)"),
+    ("log", "a [log] table (see tacmesh.example.toml)"),
+];
+
+/// What `key` (a dotted path) wants, in words.
+fn key_wants(key: &str) -> Option<&'static str> {
+    KEY_WANTS
+        .iter()
+        .find(|(name, _)| *name == key)
+        .map(|(_, wants)| *wants)
+}
+
+/// The toml crate's message with the line number it points at, in one line. A value of the
+/// wrong type or size is named by its key, with what the key wants in words.
 fn describe_toml_error(text: &str, err: &toml::de::Error) -> String {
-    let message = err.message().trim_end().to_owned();
-    match err.span() {
-        Some(span) => {
-            let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-            format!("line {line}: {message}")
-        }
-        None => message,
+    let message = err.message().trim_end().replace('\n', "; ");
+    let Some(span) = err.span() else {
+        return message;
+    };
+    let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+    let key = key_at(text, span.start);
+    match (key, wrong_value(&message)) {
+        (Some(key), Some(found)) => match (key_wants(&key), found) {
+            (Some(wants), Some(found)) => format!("line {line}: {key}: {wants}, not {found}"),
+            (Some(wants), None) => format!("line {line}: {key}: {wants}"),
+            (None, _) => format!("line {line}: {key}: {message}"),
+        },
+        _ => format!("line {line}: {message}"),
     }
+}
+
+/// What serde found, from its message about a value of the wrong type, size or range
+/// (`invalid type: string "a", expected f32` → `Some(Some("string \"a\""))`, `Some(None)`
+/// when the message does not say); `None` for other errors (an unknown key, a missing one),
+/// whose messages say what is wrong already.
+fn wrong_value(message: &str) -> Option<Option<String>> {
+    let found = |rest: &str| {
+        rest.split_once(", expected")
+            .map_or(rest, |(found, _)| found)
+            .trim()
+            .to_owned()
+    };
+    if let Some(rest) = message.strip_prefix("invalid type: ") {
+        Some(Some(found(rest)))
+    } else if let Some(rest) = message.strip_prefix("invalid value: ") {
+        Some(Some(found(rest)))
+    } else if let Some(rest) = message.strip_prefix("invalid length ") {
+        Some(Some(format!("{} values", found(rest))))
+    } else if message.starts_with("data did not match any variant") {
+        Some(None)
+    } else {
+        None
+    }
+}
+
+/// The dotted path (array indices left out) of the innermost key whose value holds byte
+/// `at` of `text`, if `text` is a TOML document.
+fn key_at(text: &str, at: usize) -> Option<String> {
+    fn walk<'a>(
+        value: &'a toml::Spanned<toml::de::DeValue<'a>>,
+        at: usize,
+        path: &mut Vec<&'a str>,
+        best: &mut Option<Vec<&'a str>>,
+    ) {
+        if value.span().contains(&at) && best.as_ref().is_none_or(|b| b.len() < path.len()) {
+            *best = Some(path.clone());
+        }
+        match value.get_ref() {
+            toml::de::DeValue::Table(table) => {
+                for (key, value) in table {
+                    path.push(&**key.get_ref());
+                    walk(value, at, path, best);
+                    path.pop();
+                }
+            }
+            toml::de::DeValue::Array(items) => {
+                for item in items.iter() {
+                    walk(item, at, path, best);
+                }
+            }
+            _ => {}
+        }
+    }
+    let document = toml::de::DeTable::parse(text).ok()?;
+    let mut best = None;
+    for (key, value) in document.get_ref() {
+        let mut path = vec![&**key.get_ref()];
+        walk(value, at, &mut path, &mut best);
+    }
+    best.filter(|path| !path.is_empty())
+        .map(|path| path.join("."))
 }
 
 #[cfg(test)]
@@ -501,6 +698,143 @@ mod tests {
         let config = parse("[socket]\nmode = \"0600\"\n").unwrap();
         assert_eq!(config.socket_mode().unwrap(), 0o600);
         assert_eq!(DaemonConfig::default().socket_mode().unwrap(), 0o660);
+    }
+
+    #[test]
+    fn a_world_writable_socket_mode_is_refused_with_the_reason() {
+        for mode in ["777", "0666", "0o662"] {
+            let err = parse(&format!("[socket]\nmode = {mode:?}\n")).unwrap_err();
+            let text = err.to_string();
+            assert!(
+                text.contains("socket.mode") && text.contains("world-writable"),
+                "{mode}: {text}"
+            );
+            assert!(text.contains("every local user"), "{mode}: {text}");
+        }
+        let config = parse("[socket]\nmode = \"0664\"\n").unwrap();
+        assert_eq!(config.socket_mode().unwrap(), 0o664);
+    }
+
+    /// Values of the wrong type or size are named by their key, with what the key wants in
+    /// words, not in Rust types.
+    #[test]
+    fn a_wrong_value_says_what_its_key_wants() {
+        let err = parse("[track]\nvoxel_size_m = \"fine\"\n").unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("track.voxel_size_m: a length in metres, for example 0.005"),
+            "{text}"
+        );
+        assert!(text.contains("line 2") && !text.contains("f32"), "{text}");
+        let err = parse("[pipeline]\nring_capacity = -1\n").unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("pipeline.ring_capacity: a whole number") && !text.contains("usize"),
+            "{text}"
+        );
+        let err = parse(
+            "[[sensor]]\nspec = \"sim\"\n[[sensor]]\nspec = \"sim\"\n\
+             pose = { translation_m = [1, 0], rotation_deg = [0, 0, 90] }\n",
+        )
+        .unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("sensor.pose.translation_m: three lengths in metres"),
+            "{text}"
+        );
+        assert!(
+            text.contains("line 5") && text.contains("2 values"),
+            "{text}"
+        );
+        let err = parse("[mesh]\nfit_to_data = \"yes\"\n").unwrap_err();
+        assert!(
+            err.to_string().contains("mesh.fit_to_data: true or false"),
+            "{err}"
+        );
+        let err = parse("[socket]\ngroup = [1]\n").unwrap_err();
+        assert!(
+            err.to_string()
+                .ends_with("socket.group: a group name or number, for example \"robot\" or 1001"),
+            "{err}"
+        );
+        let err = parse("track = 3\n").unwrap_err();
+        assert!(
+            err.to_string().contains("track: a [track] table")
+                && !err.to_string().contains("struct"),
+            "{err}"
+        );
+    }
+
+    /// Every key the example file lists, commented out or not, has its wants in words.
+    #[test]
+    fn every_example_key_says_what_it_wants() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tacmesh.example.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        // Uncomment the optional keys (`# key = value  # note`), leave the prose.
+        let uncommented: String = text
+            .lines()
+            .map(|line| match line.strip_prefix("# ") {
+                Some(rest) if rest.split_once(" = ").is_some_and(|(k, _)| is_bare_key(k)) => {
+                    rest.to_owned()
+                }
+                _ => line.to_owned(),
+            })
+            .map(|line| line + "\n")
+            .collect();
+        let document = toml::de::DeTable::parse(&uncommented).unwrap();
+        let mut keys = Vec::new();
+        fn leaves(prefix: &str, value: &toml::de::DeValue<'_>, keys: &mut Vec<String>) {
+            match value {
+                toml::de::DeValue::Table(table) => {
+                    for (key, value) in table {
+                        let path = format!("{prefix}.{}", key.get_ref());
+                        if matches!(value.get_ref(), toml::de::DeValue::Table(_)) {
+                            keys.push(path.clone());
+                        }
+                        leaves(&path, value.get_ref(), keys);
+                    }
+                }
+                toml::de::DeValue::Array(items) => {
+                    for item in items.iter() {
+                        leaves(prefix, item.get_ref(), keys);
+                    }
+                }
+                _ => keys.push(prefix.to_owned()),
+            }
+        }
+        for (key, value) in document.get_ref() {
+            if !matches!(value.get_ref(), toml::de::DeValue::Table(_)) {
+                keys.push(key.get_ref().to_string());
+            }
+            leaves(key.get_ref(), value.get_ref(), &mut keys);
+        }
+        keys.sort();
+        keys.dedup();
+        assert!(keys.len() > 20, "{keys:?}");
+        for key in &keys {
+            assert!(key_wants(key).is_some(), "{key} has no words in KEY_WANTS");
+        }
+    }
+
+    fn is_bare_key(key: &str) -> bool {
+        !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    }
+
+    #[test]
+    fn default_socket_is_in_the_runtime_dir_else_named_by_uid() {
+        let runtime = tempfile::tempdir().unwrap();
+        let tmp = Path::new("/tmp");
+        assert_eq!(
+            default_socket_path_for(Some(runtime.path().to_owned()), tmp, 1000),
+            runtime.path().join("tacmesh.sock")
+        );
+        let gone = runtime.path().join("gone");
+        for runtime_dir in [None, Some(gone)] {
+            assert_eq!(
+                default_socket_path_for(runtime_dir, tmp, 1000),
+                Path::new("/tmp/tacmesh-1000.sock")
+            );
+        }
     }
 
     #[test]

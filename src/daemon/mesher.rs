@@ -122,7 +122,15 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         Err(err) => {
             // Too little data yet is normal for a new object; anything else is worth a look.
             Counters::add(&counters.meshing_failures, 1);
-            tracing::debug!("object {}: not meshed yet: {err}", job.object_id);
+            if job.end_of_stream {
+                // No later frame brings more data: this object gets no mesh.
+                tracing::warn!(
+                    "object {}: cannot be meshed at the end of the stream: {err}",
+                    job.object_id
+                );
+            } else {
+                tracing::debug!("object {}: not meshed yet: {err}", job.object_id);
+            }
             return;
         }
     };
@@ -136,6 +144,14 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         Stage::Simplify,
         std::time::Duration::from_secs_f64((report.simplify_ms + report.fit_ms) / 1e3),
     );
+    if job.end_of_stream {
+        tracing::info!(
+            "object {}: meshed at the end of the stream: {} points into {} faces",
+            job.object_id,
+            report.points,
+            report.faces
+        );
+    }
     tracing::debug!(
         "object {}: meshed {} points into {} faces (from {}) in {:.1} ms",
         job.object_id,
@@ -171,6 +187,7 @@ mod tests {
             world_from_object: glam::Affine3A::IDENTITY,
             viewpoint_in_object: glam::Vec3::ZERO,
             newest_capture: std::time::Duration::from_millis(capture_ms),
+            end_of_stream: false,
         }
     }
 

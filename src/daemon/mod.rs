@@ -27,7 +27,7 @@ mod perception;
 pub mod planes;
 pub mod sensor;
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -47,6 +47,8 @@ use notify::{Heartbeat, Heartbeats, Notifier, SystemdFeed};
 use perception::Perception;
 
 /// Why the daemon could not start.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
     #[error(transparent)]
@@ -56,12 +58,14 @@ pub enum DaemonError {
     Sensor(#[from] Box<SensorError>),
     #[error(transparent)]
     Publish(#[from] PublishError),
+    /// Not `#[from]`: that would make the message's `{0}` a source too, printed twice by an
+    /// error chain printer.
     #[error("config [track]: {0}")]
-    Track(#[from] tacmesh_track::TrackError),
-    #[error("cannot start the {name} thread: {source}")]
+    Track(tacmesh_track::TrackError),
+    #[error("cannot start the {name} thread: {cause}")]
     Spawn {
         name: &'static str,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
@@ -114,6 +118,18 @@ pub(crate) struct Shared {
     mesh_queue: MeshQueue,
     publisher: Publisher,
     source_stop: AtomicBool,
+    /// Sources whose stream ended (a recording played once). When every configured sensor's
+    /// has, the perception thread meshes what was held back ([`perception`]).
+    streams_ended: AtomicUsize,
+    /// Set by the perception thread once it has handed out those last jobs.
+    end_of_stream_flushed: AtomicBool,
+}
+
+impl Shared {
+    /// Whether every sensor's stream has ended, so that no frame will come again.
+    fn every_stream_ended(&self) -> bool {
+        self.streams_ended.load(Ordering::Acquire) >= self.config.sensor.len()
+    }
 }
 
 /// A running daemon.
@@ -135,7 +151,8 @@ impl Daemon {
     /// claimed.
     pub fn start(config: DaemonConfig) -> Result<Daemon, DaemonError> {
         config.validate()?;
-        let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))?;
+        let objects = tacmesh_track::ObjectMap::new(perception::track_config(&config))
+            .map_err(DaemonError::Track)?;
         // Every sensor is opened before anything starts, so that a wrong spec, a missing file or
         // a backend not built fails the start. A device that is not there (yet) does not: the
         // daemon serves without it and its supervisor keeps trying to open it, with backoff.
@@ -176,6 +193,8 @@ impl Daemon {
             mesh_queue: MeshQueue::default(),
             publisher,
             source_stop: AtomicBool::new(false),
+            streams_ended: AtomicUsize::new(0),
+            end_of_stream_flushed: AtomicBool::new(false),
         });
         let mut daemon = Daemon {
             shared: Arc::clone(&shared),
@@ -190,7 +209,7 @@ impl Daemon {
             std::thread::Builder::new()
                 .name(name.into())
                 .spawn(body)
-                .map_err(|source| DaemonError::Spawn { name, source })
+                .map_err(|cause| DaemonError::Spawn { name, cause })
         };
         for worker in 0..shared.config.mesh.workers {
             let s = Arc::clone(&shared);
@@ -281,6 +300,7 @@ impl Daemon {
             // Recordings end; the daemon keeps serving their last meshes until it is stopped.
             if !said_ended
                 && self.sources.iter().all(|s| s.is_finished())
+                && self.shared.end_of_stream_flushed.load(Ordering::Acquire)
                 && self.shared.ring.stats().queued == 0
                 && self.shared.mesh_queue.is_empty()
             {
@@ -466,6 +486,9 @@ fn supervise(shared: &Shared, sensor: &Supervised<'_>, source: Option<Box<dyn De
             }
             Err(SourceError::EndOfStream { device }) => {
                 tracing::info!("{device} has no more frames");
+                // After its last frame is in the ring: the perception thread flushes only
+                // once the ring is empty too.
+                shared.streams_ended.fetch_add(1, Ordering::AcqRel);
                 break;
             }
             Err(err @ SourceError::Malformed { .. }) => {
@@ -538,6 +561,8 @@ mod tests {
             mesh_queue: MeshQueue::default(),
             publisher: Publisher::bind(PublisherConfig::new(dir.join("t.sock"))).unwrap(),
             source_stop: AtomicBool::new(false),
+            streams_ended: AtomicUsize::new(0),
+            end_of_stream_flushed: AtomicBool::new(false),
             config,
         }
     }

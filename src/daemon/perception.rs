@@ -37,6 +37,8 @@ pub struct Perception {
     /// Last frame's support planes: segmentation refines them instead of searching anew.
     plane_hints: Vec<SupportPlane>,
     malformed_logged: bool,
+    /// The end of the stream was seen and its last mesh jobs handed out.
+    flushed: bool,
 }
 
 impl Perception {
@@ -48,18 +50,71 @@ impl Perception {
             segment: SegmentConfig::live(),
             plane_hints: Vec::new(),
             malformed_logged: false,
+            flushed: false,
         }
     }
 
-    /// Takes frames from the ring until it is closed and drained.
+    /// Takes frames from the ring until it is closed and drained. When every sensor's stream
+    /// has ended and the ring is empty, meshes what was held back ([`Self::end_of_stream`]).
     pub fn run(mut self, shared: &Shared) {
         loop {
             match shared.ring.pop_timeout(Duration::from_millis(200)) {
                 Pop::Item(observation) => self.process(shared, observation),
+                Pop::TimedOut if !self.flushed && shared.every_stream_ended() => {
+                    self.end_of_stream(shared);
+                }
                 Pop::TimedOut => {}
                 Pop::Closed => break,
             }
         }
+    }
+
+    /// No frame will come again (every sensor was a recording, played once): meshes every
+    /// object whose latest state was held back (seen in fewer frames than confirm an object,
+    /// its re-mesh waiting for the rate limit, a change below the threshold), so that a
+    /// one-shot recording still gives meshes of what it showed, and says what it did. A
+    /// failure to mesh one of these is a warning from the mesher.
+    fn end_of_stream(&mut self, shared: &Shared) {
+        self.flushed = true;
+        let flushed = self.objects.flush_mesh_jobs();
+        let frames = shared
+            .counters
+            .frames_processed
+            .load(std::sync::atomic::Ordering::Relaxed);
+        if self.objects.is_empty() {
+            tracing::warn!(
+                "end of stream after {frames} frame{}: no object to mesh: no cluster of at \
+                 least {} points was left once the support planes ({} in the last frame) were \
+                 taken out; is the sensor pose right, and the object within {} m?",
+                if frames == 1 { "" } else { "s" },
+                self.objects.config().min_cluster_points,
+                self.plane_hints.len(),
+                shared.config.pipeline.max_range_m,
+            );
+        } else if flushed.is_empty() {
+            tracing::info!("end of stream: every object's mesh is up to date");
+        } else {
+            let held_back: Vec<String> = flushed
+                .iter()
+                .map(|(job, why)| format!("object {} ({why})", job.object_id))
+                .collect();
+            tracing::info!(
+                "end of stream after {frames} frame{}: meshing what was held back: {}",
+                if frames == 1 { "" } else { "s" },
+                held_back.join(", ")
+            );
+        }
+        let confirmed = self.objects.objects().filter(|o| o.confirmed).count();
+        shared
+            .counters
+            .objects_tracked
+            .store(confirmed as u64, std::sync::atomic::Ordering::Relaxed);
+        for (job, _) in flushed {
+            shared.mesh_queue.submit(job);
+        }
+        shared
+            .end_of_stream_flushed
+            .store(true, std::sync::atomic::Ordering::Release);
     }
 
     fn process(&mut self, shared: &Shared, observation: Observation) {

@@ -21,6 +21,89 @@ use tacmesh_source::DepthSource;
 
 use super::config::SensorSection;
 
+/// The kinds of spec the parser accepts, by prefix: [`SensorSpec::parse`] finds a spec's kind
+/// in [`SpecKind::ALL`] and nowhere else, so this table is the list of what `--sensor` takes
+/// (`tacmesh run --help` and the README's sensor table must name every prefix in it; a test
+/// checks the help).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SpecKind {
+    /// `sim`, `sim:demo`, `sim:SCENE.toml`
+    Sim,
+    /// `replay:PATH[?…]`
+    Replay,
+    /// `serial:camsense:PORT`
+    Camsense,
+    /// `serial:rplidar:PORT[@BAUD]`
+    Rplidar,
+    /// `v4l2:/dev/videoN?fx=…`
+    V4l2,
+    /// `openni2:[URI]`
+    OpenNi2,
+    /// `depthai:[DEVICE|FILE.mcap][?…]`
+    DepthAi,
+}
+
+impl SpecKind {
+    /// Every kind, in the order the help lists them.
+    pub const ALL: [SpecKind; 7] = [
+        SpecKind::Sim,
+        SpecKind::Replay,
+        SpecKind::Camsense,
+        SpecKind::Rplidar,
+        SpecKind::V4l2,
+        SpecKind::OpenNi2,
+        SpecKind::DepthAi,
+    ];
+
+    /// The prefix a spec of this kind starts with. `sim`, `openni2` and `depthai` may also
+    /// stand alone (no colon, no options).
+    pub fn prefix(self) -> &'static str {
+        match self {
+            SpecKind::Sim => "sim:",
+            SpecKind::Replay => "replay:",
+            SpecKind::Camsense => "serial:camsense:",
+            SpecKind::Rplidar => "serial:rplidar:",
+            SpecKind::V4l2 => "v4l2:",
+            SpecKind::OpenNi2 => "openni2:",
+            SpecKind::DepthAi => "depthai:",
+        }
+    }
+
+    /// The backend's name and the cargo feature that builds it, for the backends behind one.
+    pub fn feature(self) -> Option<(&'static str, &'static str)> {
+        match self {
+            SpecKind::V4l2 => Some(("V4L2", "v4l2")),
+            SpecKind::OpenNi2 => Some(("OpenNI2", "openni2")),
+            SpecKind::DepthAi => Some(("DepthAI", "depthai")),
+            SpecKind::Sim | SpecKind::Replay | SpecKind::Camsense | SpecKind::Rplidar => None,
+        }
+    }
+
+    /// Whether this build has the backend.
+    pub fn is_built(self) -> bool {
+        match self {
+            SpecKind::V4l2 => cfg!(feature = "v4l2"),
+            SpecKind::OpenNi2 => cfg!(feature = "openni2"),
+            SpecKind::DepthAi => cfg!(feature = "depthai"),
+            SpecKind::Sim | SpecKind::Replay | SpecKind::Camsense | SpecKind::Rplidar => true,
+        }
+    }
+
+    /// The kind of `spec` and what follows its prefix.
+    fn split(spec: &str) -> Option<(SpecKind, &str)> {
+        SpecKind::ALL.into_iter().find_map(|kind| {
+            let prefix = kind.prefix();
+            let alone = matches!(kind, SpecKind::Sim | SpecKind::OpenNi2 | SpecKind::DepthAi)
+                && spec == prefix.trim_end_matches(':');
+            if alone {
+                Some((kind, ""))
+            } else {
+                spec.strip_prefix(prefix).map(|rest| (kind, rest))
+            }
+        })
+    }
+}
+
 /// A sensor spec, parsed.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SensorSpec {
@@ -123,12 +206,14 @@ impl V4l2Spec {
 }
 
 /// Why a sensor could not be opened.
+/// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
+/// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
 #[derive(Debug, thiserror::Error)]
 pub enum SensorError {
     #[error(
         "unknown sensor spec {spec:?}: expected `sim`, `sim:SCENE.toml`, `replay:PATH`, \
-         `v4l2:/dev/videoN?…`, `openni2:[URI]`, `depthai:[DEVICE|FILE.mcap]`, \
-         `serial:camsense:PORT` or `serial:rplidar:PORT[@BAUD]`"
+         `serial:camsense:PORT`, `serial:rplidar:PORT[@BAUD]`, `v4l2:/dev/videoN?…`, \
+         `openni2:[URI]` or `depthai:[DEVICE|FILE.mcap]` (see `tacmesh run --help`)"
     )]
     Unknown { spec: String },
     #[error(
@@ -144,10 +229,10 @@ pub enum SensorError {
     BadOption { spec: String, reason: String },
     #[error(transparent)]
     SceneFile(#[from] tacmesh_sim::SceneFileError),
-    #[error("the simulated camera of {name} cannot be built: {source}")]
+    #[error("the simulated camera of {name} cannot be built: {cause}")]
     Camera {
         name: String,
-        source: tacmesh_sim::DepthCameraError,
+        cause: tacmesh_sim::DepthCameraError,
     },
     #[error(transparent)]
     Oni(#[from] tacmesh_oni::OniError),
@@ -187,49 +272,56 @@ impl SensorSpec {
         }
     }
 
+    /// Parses a spec by its prefix (one of [`SpecKind::ALL`]). A spec of a backend this build
+    /// lacks fails with [`SensorError::FeatureOff`] before its options are looked at: no point
+    /// getting the intrinsics right for a backend that is not there.
     pub fn parse(spec: &str) -> Result<SensorSpec, SensorError> {
         let unknown = || SensorError::Unknown { spec: spec.into() };
-        let (backend, rest) = match spec.split_once(':') {
-            Some((backend, rest)) => (backend, Some(rest)),
-            None => (spec, None),
-        };
-        match (backend, rest) {
-            ("sim", None | Some("") | Some("demo")) => Ok(SensorSpec::SimDemo),
-            ("sim", Some(path)) => Ok(SensorSpec::SimScene(PathBuf::from(path))),
-            ("replay", Some(path)) if !path.is_empty() => {
-                let path = PathBuf::from(path);
+        let (kind, rest) = SpecKind::split(spec).ok_or_else(unknown)?;
+        if let Some((backend, feature)) = kind.feature().filter(|_| !kind.is_built()) {
+            return Err(SensorError::FeatureOff {
+                spec: spec.into(),
+                backend,
+                feature,
+            });
+        }
+        match kind {
+            SpecKind::Sim => match rest {
+                "" | "demo" => Ok(SensorSpec::SimDemo),
+                path => Ok(SensorSpec::SimScene(PathBuf::from(path))),
+            },
+            SpecKind::Replay => {
+                if rest.is_empty() {
+                    return Err(unknown());
+                }
+                let path = PathBuf::from(rest);
                 match extension(&path).as_str() {
                     "oni" => Ok(SensorSpec::Oni(path)),
                     "bag" => Ok(SensorSpec::Bag(path)),
                     _ => Ok(SensorSpec::Sequence(Box::new(
-                        tacmesh_replay::ReplaySpec::parse(&path.to_string_lossy())?,
+                        tacmesh_replay::ReplaySpec::parse(rest)?,
                     ))),
                 }
             }
-            ("serial", Some(rest)) => match rest.split_once(':') {
-                Some(("camsense", port)) if !port.is_empty() => {
-                    Ok(SensorSpec::Camsense(port.into()))
-                }
-                Some(("rplidar", port)) if !port.is_empty() => {
-                    let (port, baud) = match port.rsplit_once('@') {
-                        Some((port, baud)) => (port, baud.parse().map_err(|_| unknown())?),
-                        None => (port, tacmesh_serial::SerialConfig::RPLIDAR_A1_A2.baud_rate),
-                    };
-                    Ok(SensorSpec::Rplidar {
-                        port: port.into(),
-                        baud,
-                    })
-                }
-                _ => Err(unknown()),
-            },
-            ("v4l2", Some(rest)) => Ok(SensorSpec::V4l2(Box::new(V4l2Spec::parse(spec, rest)?))),
-            ("openni2", rest) => Ok(SensorSpec::OpenNi2(
-                rest.filter(|uri| !uri.is_empty()).map(str::to_owned),
+            SpecKind::Camsense if !rest.is_empty() => Ok(SensorSpec::Camsense(rest.into())),
+            SpecKind::Rplidar if !rest.is_empty() => {
+                let (port, baud) = match rest.rsplit_once('@') {
+                    Some((port, baud)) => (port, baud.parse().map_err(|_| unknown())?),
+                    None => (rest, tacmesh_serial::SerialConfig::RPLIDAR_A1_A2.baud_rate),
+                };
+                Ok(SensorSpec::Rplidar {
+                    port: port.into(),
+                    baud,
+                })
+            }
+            SpecKind::Camsense | SpecKind::Rplidar => Err(unknown()),
+            SpecKind::V4l2 => Ok(SensorSpec::V4l2(Box::new(V4l2Spec::parse(spec, rest)?))),
+            SpecKind::OpenNi2 => Ok(SensorSpec::OpenNi2(
+                Some(rest).filter(|uri| !uri.is_empty()).map(str::to_owned),
             )),
-            ("depthai", rest) => Ok(SensorSpec::DepthAi(Box::new(
-                tacmesh_depthai::DepthAiOptions::parse_spec(rest.unwrap_or(""))?,
+            SpecKind::DepthAi => Ok(SensorSpec::DepthAi(Box::new(
+                tacmesh_depthai::DepthAiOptions::parse_spec(rest)?,
             ))),
-            _ => Err(unknown()),
         }
     }
 
@@ -244,7 +336,7 @@ impl SensorSpec {
                 let name = scene.name.clone();
                 let mut camera = scene
                     .into_camera()
-                    .map_err(|source| SensorError::Camera { name, source })?;
+                    .map_err(|cause| SensorError::Camera { name, cause })?;
                 if let Some(paced) = section.paced {
                     camera.set_paced(paced);
                 }
@@ -418,60 +510,92 @@ mod tests {
             SensorSpec::Camsense("/dev/ttyUSB1".into())
         );
         assert!(SensorSpec::parse("serial:lds:/dev/ttyUSB1").is_err());
-        let err = SensorSpec::parse("v4l2:/dev/video2").unwrap_err();
+        assert!(SensorSpec::parse("simulated").is_err());
+        assert!(SensorSpec::parse("replay:").is_err());
+        if cfg!(feature = "openni2") {
+            assert_eq!(
+                SensorSpec::parse("openni2:").unwrap(),
+                SensorSpec::OpenNi2(None)
+            );
+            assert_eq!(
+                SensorSpec::parse("openni2").unwrap(),
+                SensorSpec::OpenNi2(None)
+            );
+            assert_eq!(
+                SensorSpec::parse("openni2:Dummy").unwrap(),
+                SensorSpec::OpenNi2(Some("Dummy".into()))
+            );
+        }
+        if cfg!(feature = "depthai") {
+            let recording = SensorSpec::parse("depthai:runs/a.mcap?rate=max").unwrap();
+            assert!(recording.is_recording());
+            let err = SensorSpec::parse("depthai:?fps=0").unwrap_err();
+            assert!(err.to_string().contains("fps"), "{err}");
+        }
+    }
+
+    #[test]
+    fn v4l2_options_need_intrinsics_and_known_keys() {
+        let err = V4l2Spec::parse("v4l2:/dev/video2", "/dev/video2").unwrap_err();
         assert!(err.to_string().contains("fx, fy, cx and cy"), "{err}");
-        let err =
-            SensorSpec::parse("v4l2:/dev/video2?fx=390&fy=390&cx=331&cy=242&gain=3").unwrap_err();
+        let spec = "v4l2:/dev/video2?fx=390&fy=390&cx=331&cy=242&gain=3";
+        let err = V4l2Spec::parse(spec, spec.trim_start_matches("v4l2:")).unwrap_err();
         assert!(err.to_string().contains("gain"), "{err}");
-        assert_eq!(
-            SensorSpec::parse("openni2:").unwrap(),
-            SensorSpec::OpenNi2(None)
-        );
-        assert_eq!(
-            SensorSpec::parse("openni2:Dummy").unwrap(),
-            SensorSpec::OpenNi2(Some("Dummy".into()))
-        );
-        let SensorSpec::DepthAi(camera) = SensorSpec::parse("depthai:").unwrap() else {
-            panic!("depthai: is a camera")
-        };
-        assert_eq!(camera.name(), "depthai:first device");
-        let recording = SensorSpec::parse("depthai:runs/a.mcap?rate=max").unwrap();
-        assert!(recording.is_recording());
-        let err = SensorSpec::parse("depthai:?fps=0").unwrap_err();
-        assert!(err.to_string().contains("fps"), "{err}");
+    }
+
+    /// Without the feature, a spec of the backend says how to build it, whatever its options
+    /// (it does not first ask for intrinsics it could not use), naming the spec as given.
+    #[test]
+    fn a_backend_not_built_says_so_before_checking_options() {
+        for (spec, feature) in [
+            ("v4l2:/dev/video99", "v4l2"),
+            ("openni2:", "openni2"),
+            ("depthai:", "depthai"),
+            ("depthai:?fps=0", "depthai"),
+        ] {
+            let kind = SpecKind::split(spec).expect("a known prefix").0;
+            if kind.is_built() {
+                continue;
+            }
+            let text = SensorSpec::parse(spec).unwrap_err().to_string();
+            assert!(
+                text.contains(&format!("--features {feature}")),
+                "{spec}: {text}"
+            );
+            assert!(text.contains(&format!("{spec:?}")), "{spec}: {text}");
+            assert!(!text.contains("fx, fy"), "{spec}: {text}");
+            assert!(!text.contains("first device"), "{spec}: {text}");
+        }
     }
 
     #[test]
     fn v4l2_specs_carry_intrinsics() {
-        let spec = SensorSpec::parse(
-            "v4l2:/dev/video2?fx=390.43&fy=390.43&cx=331.39&cy=242.19&width=848&height=480&fps=15",
-        )
-        .unwrap();
-        let SensorSpec::V4l2(v4l2) = &spec else {
-            panic!("{spec:?}")
-        };
+        let spec =
+            "v4l2:/dev/video2?fx=390.43&fy=390.43&cx=331.39&cy=242.19&width=848&height=480&fps=15";
+        let v4l2 = V4l2Spec::parse(spec, spec.trim_start_matches("v4l2:")).unwrap();
         assert_eq!(v4l2.device, "/dev/video2");
         assert_eq!((v4l2.intrinsics.width, v4l2.fps), (848, 15));
         assert_eq!(v4l2.depth_scale_m, 0.001);
-        // Without the feature the open says how to build it; with it, the missing node is named.
-        let err = spec
-            .open(&SensorSection::default())
-            .err()
-            .expect("no camera here");
-        let text = err.to_string();
-        assert!(
-            text.contains("v4l2") || text.contains("/dev/video2"),
-            "{text}"
-        );
+        // With the feature, the missing node is named at open.
+        if cfg!(feature = "v4l2") {
+            let err = SensorSpec::parse(spec)
+                .unwrap()
+                .open(&SensorSection::default())
+                .err()
+                .expect("no camera here");
+            assert!(err.to_string().contains("/dev/video2"), "{err}");
+        }
     }
 
     #[test]
-    fn depthai_without_its_feature_says_how_to_build_it() {
-        let spec = SensorSpec::parse("depthai:/nonexistent/run.mcap").unwrap();
-        let err = spec
-            .open(&SensorSection::default())
-            .err()
-            .expect("no such recording");
+    fn a_depthai_recording_names_its_file_or_the_feature() {
+        let err = match SensorSpec::parse("depthai:/nonexistent/run.mcap") {
+            Ok(spec) => spec
+                .open(&SensorSection::default())
+                .err()
+                .expect("no such recording"),
+            Err(err) => err,
+        };
         let text = err.to_string();
         if cfg!(feature = "depthai") {
             assert!(text.contains("/nonexistent/run.mcap"), "{text}");

@@ -9,6 +9,8 @@
 //!   (created, removed, moved, reset objects).
 //! - [`ObjectMap::take_mesh_jobs`]: the objects that changed enough to re-mesh, as
 //!   [`MeshJob`]s (a grid for `tacmesh_reconstruct::surface::mesh_moment_grid`).
+//! - [`ObjectMap::flush_mesh_jobs`]: at the end of a stream, every object whose latest state
+//!   was held back from meshing, with why ([`HeldBack`]).
 //! - [`ObjectMap::objects`]: an [`ObjectSummary`] per object.
 //!
 //! Modules, in the order a frame runs through them: [`associate`] (greedy nearest centroids),
@@ -24,4 +26,4 @@ pub mod object_map;
 pub mod solve6;
 
 pub use config::{TrackConfig, TrackError};
-pub use object_map::{FrameClusters, FrameReport, MeshJob, ObjectMap, ObjectSummary};
+pub use object_map::{FrameClusters, FrameReport, HeldBack, MeshJob, ObjectMap, ObjectSummary};

@@ -64,6 +64,45 @@ pub struct MeshJob {
     pub viewpoint_in_object: Vec3,
     /// Capture time of the newest points in `grid`.
     pub newest_capture: Duration,
+    /// Released by [`ObjectMap::flush_mesh_jobs`] when the stream ended: no later frame will
+    /// bring another chance, so a failure to mesh it is worth a warning.
+    pub end_of_stream: bool,
+}
+
+/// Why an object's latest fused state had not been meshed when its stream ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HeldBack {
+    /// Seen in fewer frames than `confirm_frames` (it could have been noise or a passing hand).
+    Unconfirmed {
+        frames_seen: u32,
+        confirm_frames: u32,
+    },
+    /// Changed enough to re-mesh, but meshed less than `remesh_interval` before its last frame.
+    RateLimited,
+    /// Changed since its last meshing, by less than `remesh_min_change`.
+    SmallChange { changed_fraction: f32 },
+}
+
+impl std::fmt::Display for HeldBack {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            HeldBack::Unconfirmed {
+                frames_seen,
+                confirm_frames,
+            } => write!(
+                f,
+                "seen in {frames_seen} frame{}, fewer than the {confirm_frames} that confirm an \
+                 object",
+                if *frames_seen == 1 { "" } else { "s" }
+            ),
+            HeldBack::RateLimited => write!(f, "its re-mesh was waiting for the rate limit"),
+            HeldBack::SmallChange { changed_fraction } => write!(
+                f,
+                "{:.1} % changed since its last mesh, below the re-mesh threshold",
+                changed_fraction * 100.0
+            ),
+        }
+    }
 }
 
 /// One object, as the daemon and its logs see it.
@@ -80,7 +119,8 @@ pub struct ObjectSummary {
     pub changed_fraction: f32,
     pub frames_seen: u32,
     pub last_seen: Duration,
-    /// Seen in `confirm_frames` frames, so offered for meshing.
+    /// Seen in `confirm_frames` frames, so offered for meshing (or meshed at the end of its
+    /// stream, see [`ObjectMap::flush_mesh_jobs`]).
     pub confirmed: bool,
 }
 
@@ -295,15 +335,54 @@ impl ObjectMap {
             object.meshing_runs += 1;
             object.last_meshed = Some(now_capture);
             self.meshing_runs += 1;
-            jobs.push(MeshJob {
-                object_id: object.id,
-                grid: object.grid.clone(),
-                world_from_object: object.world_from_object,
-                viewpoint_in_object: object.viewpoint_in_object,
-                newest_capture: object.last_seen,
-            });
+            jobs.push(Self::job_of(object, false));
         }
         jobs
+    }
+
+    /// At the end of the stream (a recording played once): a job for every object whose
+    /// latest state was not meshed, whatever held it back (confirmation, rate limit, change
+    /// threshold), with the reason; each is marked clean and counted as a meshing run. No
+    /// later frame would release them, and a one-shot recording must still mesh what it saw.
+    pub fn flush_mesh_jobs(&mut self) -> Vec<(MeshJob, HeldBack)> {
+        let config = &self.config;
+        let mut jobs = Vec::new();
+        for object in self.objects.values_mut() {
+            if object.change.meshed() && object.change.changed_cells() == 0 {
+                continue;
+            }
+            let held_back = if object.frames_seen < config.confirm_frames {
+                HeldBack::Unconfirmed {
+                    frames_seen: object.frames_seen,
+                    confirm_frames: config.confirm_frames,
+                }
+            } else if !object.change.meshed()
+                || object.change.changed_fraction() >= config.remesh_min_change
+            {
+                HeldBack::RateLimited
+            } else {
+                HeldBack::SmallChange {
+                    changed_fraction: object.change.changed_fraction(),
+                }
+            };
+            object.change.mark_meshed(&object.grid);
+            object.meshing_runs += 1;
+            object.last_meshed = Some(object.last_seen);
+            self.meshing_runs += 1;
+            jobs.push((Self::job_of(object, true), held_back));
+        }
+        jobs
+    }
+
+    fn job_of(object: &TrackedObject, end_of_stream: bool) -> MeshJob {
+        MeshJob {
+            object_id: object.id,
+            grid: object.grid.clone(),
+            world_from_object: object.world_from_object,
+            viewpoint_in_object: object.viewpoint_in_object,
+            newest_capture: object.last_seen,
+            end_of_stream,
+        }
     }
 
     /// Every object, by id.
@@ -317,7 +396,7 @@ impl ObjectMap {
             changed_fraction: o.change.changed_fraction(),
             frames_seen: o.frames_seen,
             last_seen: o.last_seen,
-            confirmed: o.frames_seen >= self.config.confirm_frames,
+            confirmed: o.frames_seen >= self.config.confirm_frames || o.meshing_runs > 0,
         })
     }
 

@@ -2,7 +2,7 @@
 
 mod util;
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Quat, Vec3};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
@@ -446,4 +446,58 @@ fn split_off_fragment_joins_its_object() {
     assert_eq!(report.cluster_ids[1], Some(1), "{report:?}");
     assert_eq!(report.created, vec![2]);
     assert_eq!(map.len(), 2);
+}
+
+/// A stream that ends (a recording played once) still has what it showed meshed: the flush
+/// releases objects held back by the confirmation count or the re-mesh rate limit, says why,
+/// and releases nothing twice.
+#[test]
+fn end_of_stream_flushes_what_was_held_back() {
+    use tacmesh_track::HeldBack;
+    let mut rng = rng(11);
+    let mut map = map();
+    let pose = at(0.0, 0.0, 0.6);
+    // One frame: tracked, but not confirmed, so not offered for meshing.
+    map.integrate(&frame(
+        0,
+        vec![view(SPHERE, pose, Vec3::ZERO, 3000, SIGMA_M, &mut rng)],
+    ));
+    assert!(map.take_mesh_jobs(Duration::ZERO).is_empty());
+    assert_eq!(map.objects().filter(|o| o.confirmed).count(), 0);
+    let flushed = map.flush_mesh_jobs();
+    assert_eq!(flushed.len(), 1);
+    let (job, why) = &flushed[0];
+    assert!(job.end_of_stream && !job.grid.is_empty());
+    assert_eq!(
+        *why,
+        HeldBack::Unconfirmed {
+            frames_seen: 1,
+            confirm_frames: 3
+        }
+    );
+    assert!(why.to_string().contains("seen in 1 frame,"), "{why}");
+    assert_eq!(map.objects().filter(|o| o.confirmed).count(), 1);
+    assert!(map.flush_mesh_jobs().is_empty(), "nothing new since");
+
+    // Confirmed and meshed, then a new side comes into view within the rate limit.
+    let mut map = self::map();
+    for i in 0..3 {
+        let points = view(SPHERE, pose, Vec3::ZERO, 3000, SIGMA_M, &mut rng);
+        map.integrate(&frame(i, vec![points]));
+        map.take_mesh_jobs(FRAME * i);
+    }
+    assert_eq!(map.meshing_runs(), 1);
+    let side = view(
+        SPHERE,
+        pose,
+        Vec3::new(0.6, 0.0, 0.6),
+        3000,
+        SIGMA_M,
+        &mut rng,
+    );
+    map.integrate(&frame(3, vec![side]));
+    assert!(map.take_mesh_jobs(FRAME * 3).is_empty(), "rate-limited");
+    let flushed = map.flush_mesh_jobs();
+    assert_eq!(flushed.len(), 1);
+    assert_eq!(flushed[0].1, HeldBack::RateLimited);
 }
