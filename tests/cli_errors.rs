@@ -15,10 +15,16 @@ fn stderr_of(args: &[&str]) -> String {
     stderr
 }
 
+/// Named once, with the OS's reason once: the context `main` prints adds no second copy.
 #[test]
-fn missing_cloud_file_is_named() {
+fn missing_cloud_file_is_named_once_with_its_reason() {
     let stderr = stderr_of(&["mesh", "/nonexistent/cloud.ply", "-o", "/tmp/never.ply"]);
-    assert!(stderr.contains("/nonexistent/cloud.ply"), "{stderr}");
+    assert_eq!(
+        stderr.matches("/nonexistent/cloud.ply").count(),
+        1,
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
 }
 
 #[test]
@@ -51,4 +57,22 @@ fn too_few_points_is_a_clear_error() {
     let out = path_str(&dir.path().join("out.ply")).to_owned();
     let stderr = stderr_of(&["mesh", path_str(&path), "-o", &out]);
     assert!(stderr.contains("too few"), "{stderr}");
+}
+
+/// A missing recording, bag or scene file is reported with the OS's reason once: the error
+/// chain printed by `main` must not repeat it.
+#[test]
+fn missing_sensor_file_says_no_such_file_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let socket = path_str(&dir.path().join("tacmesh.sock")).to_owned();
+    for spec in [
+        "replay:/nonexistent/recording.oni",
+        "replay:/nonexistent/recording.bag",
+        "replay:/nonexistent/cloud.pcd",
+        "sim:/nonexistent/scene.toml",
+    ] {
+        let stderr = stderr_of(&["run", "--sensor", spec, "--socket", &socket]);
+        assert_eq!(stderr.matches("os error 2").count(), 1, "{spec}: {stderr}");
+        assert!(stderr.contains("/nonexistent/"), "{spec}: {stderr}");
+    }
 }

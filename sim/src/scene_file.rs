@@ -83,11 +83,10 @@ pub struct SceneFile {
 /// Why a scene file could not be used. Every message starts with the file.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFileError {
-    #[error("cannot read scene file {}: {source}", file.display())]
+    #[error("cannot read scene file {}: {error}", file.display())]
     Read {
         file: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
 
     /// Not TOML, a key the format does not have, or a value of the wrong type. toml's message
@@ -136,9 +135,9 @@ impl SceneFile {
     /// Reads and parses the scene file at `path`; mesh paths are relative to its directory.
     pub fn load(path: impl AsRef<Path>) -> Result<SceneFile, SceneFileError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| SceneFileError::Read {
+        let text = std::fs::read_to_string(path).map_err(|error| SceneFileError::Read {
             file: path.to_owned(),
-            source,
+            error,
         })?;
         let base_dir = path.parent().unwrap_or(Path::new("."));
         SceneFile::parse(&text, base_dir, &path.display().to_string())

@@ -56,11 +56,10 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     if args.objects {
         // In file order with invalid points, so that labels.txt lines up with the file.
         let cloud = tacmesh::formats::read_cloud_in_file_order(&args.cloud)
-            .with_context(|| format!("reading point cloud {}", args.cloud.display()))?;
+            .context("reading the point cloud")?;
         return mesh_objects(&args, &cloud);
     }
-    let cloud = tacmesh::formats::read_cloud(&args.cloud)
-        .with_context(|| format!("reading point cloud {}", args.cloud.display()))?;
+    let cloud = tacmesh::formats::read_cloud(&args.cloud).context("reading the point cloud")?;
     let mut config = MeshConfig {
         viewpoint: args.viewpoint,
         ..MeshConfig::default()
@@ -73,8 +72,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     }
     let (mesh, report) =
         mesh_cloud(&cloud, &config).with_context(|| format!("meshing {}", args.cloud.display()))?;
-    tacmesh::formats::write_mesh(&args.output, &mesh)
-        .with_context(|| format!("writing mesh {}", args.output.display()))?;
+    tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
     if args.json {
         super::print_json(&report)?;
     } else {
@@ -140,8 +138,7 @@ fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<
         let file = dir.join(format!("object-{id}.ply"));
         match mesh_cloud(&object, &config) {
             Ok((mesh, report)) => {
-                tacmesh::formats::write_mesh(&file, &mesh)
-                    .with_context(|| format!("writing mesh {}", file.display()))?;
+                tacmesh::formats::write_mesh(&file, &mesh).context("writing the mesh")?;
                 tracing::info!(
                     points = report.points,
                     faces = report.faces,
