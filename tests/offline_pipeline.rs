@@ -1,7 +1,7 @@
 //! The offline pipeline end to end through the CLI: sample a shape with the paper's 20 mm
 //! noise, mesh it with the defaults, judge it against the ground truth.
 
-use crate::util::{path_str, tacmesh_json, tacmesh_ok};
+use crate::util::{path_str, tacmesh_json, tacmesh_logging, tacmesh_ok};
 
 /// Samples `shape`, meshes it, evaluates it; returns (faces, recon_faces, mhe).
 fn sample_mesh_eval(shape: &str, seed: &str) -> (u64, u64, f64) {
@@ -68,4 +68,56 @@ fn torus_at_20mm_noise_beats_table1() {
     let (faces, _, mhe) = sample_mesh_eval("torus", "8");
     assert!(faces <= 134, "torus faces {faces}");
     assert!(mhe <= 0.0143, "torus MHE {mhe}");
+}
+
+/// A scanner's misses written as `nan` and `inf` in an ascii PLY are left out and counted, in
+/// `--json` and in the log, as in every other format; they do not fail the file.
+#[test]
+fn non_finite_points_in_an_ascii_ply_are_left_out_and_counted() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let xyz = dir.path().join("cube.xyz");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "cube",
+        "--points",
+        "20000",
+        "--seed",
+        "1",
+        "-o",
+        path_str(&xyz),
+    ]);
+    let lines: Vec<String> = std::fs::read_to_string(&xyz)
+        .expect("sampled cloud")
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n",
+        lines.len() + 2
+    );
+    for (i, line) in lines.iter().enumerate() {
+        if i == 100 {
+            ply += "nan nan nan\n0.1 inf 0.2\n";
+        }
+        ply += line;
+        ply.push('\n');
+    }
+    let cloud = dir.path().join("cube.ply");
+    std::fs::write(&cloud, ply).expect("write the ascii PLY");
+    let mesh = dir.path().join("mesh.ply");
+    let out = tacmesh_logging(
+        &["mesh", path_str(&cloud), "-o", path_str(&mesh), "--json"],
+        "info",
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(report["non_finite_points"], 2, "{report}");
+    assert_eq!(report["points"], lines.len(), "{report}");
+    assert!(
+        stderr.contains("left out 2 points with a NaN or infinite coordinate"),
+        "{stderr}"
+    );
 }

@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use tacmesh::formats::{read_cloud_file, CloudFile, NonFinite};
 use tacmesh::glam::Vec3;
 use tacmesh::pipeline::{mesh_cloud, Length, MeshConfig};
 use tacmesh::segment::{segment, SegmentConfig};
@@ -53,13 +54,25 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
 }
 
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
-    if args.objects {
-        // In file order with invalid points, so that labels.txt lines up with the file.
-        let cloud = tacmesh::formats::read_cloud_in_file_order(&args.cloud)
-            .context("reading the point cloud")?;
-        return mesh_objects(&args, &cloud);
+    // With --objects in file order with the invalid points, so that labels.txt lines up with
+    // the file; they are labelled 0 and meshed with no object.
+    let non_finite = if args.objects {
+        NonFinite::Keep
+    } else {
+        NonFinite::Drop
+    };
+    let file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
+    if file.non_finite > 0 {
+        tracing::info!(
+            "{}: left out {} points with a NaN or infinite coordinate",
+            args.cloud.display(),
+            file.non_finite
+        );
     }
-    let cloud = tacmesh::formats::read_cloud(&args.cloud).context("reading the point cloud")?;
+    if args.objects {
+        return mesh_objects(&args, &file);
+    }
+    let cloud = file.cloud;
     let mut config = MeshConfig {
         viewpoint: args.viewpoint,
         ..MeshConfig::default()
@@ -74,7 +87,10 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         mesh_cloud(&cloud, &config).with_context(|| format!("meshing {}", args.cloud.display()))?;
     tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
     if args.json {
-        super::print_json(&report)?;
+        super::print_json(&MeshOutput {
+            non_finite_points: file.non_finite,
+            report,
+        })?;
     } else {
         tracing::info!(
             points = report.points,
@@ -89,6 +105,15 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What `--json` prints: the pipeline's report and what reading the file found.
+#[derive(serde::Serialize)]
+struct MeshOutput {
+    /// Points of the file with a NaN or infinite coordinate, left out of the mesh.
+    non_finite_points: usize,
+    #[serde(flatten)]
+    report: tacmesh::pipeline::MeshReport,
+}
+
 /// One line of `--objects --json`.
 #[derive(serde::Serialize)]
 struct ObjectReport {
@@ -99,7 +124,8 @@ struct ObjectReport {
 }
 
 /// `--objects`: segment the scene, mesh each object, write the meshes and `labels.txt`.
-fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<()> {
+fn mesh_objects(args: &MeshArgs, file: &CloudFile) -> anyhow::Result<()> {
+    let cloud = &file.cloud;
     let dir = &args.output;
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
@@ -166,6 +192,7 @@ fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<
         .with_context(|| format!("writing {}", labels_path.display()))?;
     if args.json {
         super::print_json(&serde_json::json!({
+            "non_finite_points": file.non_finite,
             "planes": segmentation.planes.len(),
             "objects": reports,
         }))?;
