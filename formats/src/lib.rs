@@ -2,8 +2,8 @@
 //!
 //! Entry points, each choosing the format by the file's extension:
 //! - [`read_cloud_file`]: `.ply`, `.pcd`, `.xyz`/`.txt`/`.pts` to a [`CloudFile`]: the points,
-//!   and how many had a NaN or infinite coordinate (dropped or kept, one rule for every
-//!   format). [`read_cloud`] is its finite points.
+//!   how many had a NaN or infinite coordinate (dropped or kept, one rule for every format),
+//!   and the sensor pose when the file records one. [`read_cloud`] is its finite points.
 //! - [`read_mesh`]: `.obj`, `.ply` to a [`TriMesh`] (polygons fan-triangulated).
 //! - [`write_cloud`]: `.ply` (binary little-endian) or `.xyz` (text).
 //! - [`write_mesh`]: `.ply` (binary little-endian) or `.obj` (text).
@@ -24,6 +24,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+use glam::Affine3A;
 use tacmesh_source::{PointCloud, TriMesh};
 
 /// Why a file could not be read or written.
@@ -83,6 +84,9 @@ pub struct CloudFile {
     pub cloud: PointCloud,
     /// Points with a NaN or infinite coordinate: dropped or kept, as asked.
     pub non_finite: usize,
+    /// The sensor's pose in the cloud's frame, when the file records one (PCD `VIEWPOINT`);
+    /// its translation is where the scan was seen from.
+    pub cloud_from_sensor: Option<Affine3A>,
 }
 
 /// Reads a point cloud, choosing the format by extension: `.ply`, `.pcd`, or `.xyz` (also
@@ -91,10 +95,15 @@ pub struct CloudFile {
 /// dropped or kept as `non_finite` says, and counted either way.
 pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, FormatError> {
     let name = path.display().to_string();
-    let parse: fn(&[u8], &str) -> Result<PointCloud, FormatError> = match extension(path).as_str() {
-        "ply" => ply::parse_cloud,
-        "pcd" => |bytes, name| pcd::parse(bytes, name).map(pcd::PcdCloud::into_cloud),
-        "xyz" | "txt" | "pts" => xyz::parse,
+    // Only PCD records a sensor pose; PLY and XYZ have no standard place for one.
+    let (mut cloud, cloud_from_sensor) = match extension(path).as_str() {
+        "ply" => (ply::parse_cloud(&read_bytes(path)?, &name)?, None),
+        "pcd" => {
+            let pcd = pcd::parse(&read_bytes(path)?, &name)?;
+            let pose = pcd.cloud_from_sensor;
+            (pcd.into_cloud(), pose)
+        }
+        "xyz" | "txt" | "pts" => (xyz::parse(&read_bytes(path)?, &name)?, None),
         _ => {
             return Err(FormatError::UnsupportedExtension {
                 name,
@@ -103,7 +112,6 @@ pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, 
             })
         }
     };
-    let mut cloud = parse(&read_bytes(path)?, &name)?;
     let count = match non_finite {
         NonFinite::Drop => cloud.retain_finite(),
         NonFinite::Keep => cloud.points.iter().filter(|p| !p.is_finite()).count(),
@@ -111,6 +119,7 @@ pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, 
     Ok(CloudFile {
         cloud,
         non_finite: count,
+        cloud_from_sensor,
     })
 }
 

@@ -27,8 +27,9 @@ pub struct MeshArgs {
     #[arg(long)]
     max_residual_m: Option<f32>,
     /// Sensor position "x,y,z" in the cloud's frame, for one-view scans (orients normals towards
-    /// it); without it normals are oriented by propagation
-    #[arg(long, value_parser = parse_vec3)]
+    /// it) [default: the file's own (a PCD's VIEWPOINT); without one normals are oriented by
+    /// propagation]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
     /// Print one JSON object with face counts, the residual reached and per-stage milliseconds
     #[arg(long)]
@@ -69,12 +70,13 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
             file.non_finite
         );
     }
+    let viewpoint = viewpoint(&args, &file);
     if args.objects {
-        return mesh_objects(&args, &file);
+        return mesh_objects(&args, &file, viewpoint);
     }
     let cloud = file.cloud;
     let mut config = MeshConfig {
-        viewpoint: args.viewpoint,
+        viewpoint,
         ..MeshConfig::default()
     };
     if let Some(v) = args.voxel_m {
@@ -89,6 +91,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     if args.json {
         super::print_json(&MeshOutput {
             non_finite_points: file.non_finite,
+            viewpoint: viewpoint.map(|v| v.to_array()),
             report,
         })?;
     } else {
@@ -105,11 +108,30 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Where normals face: `--viewpoint`, else the sensor position the file records (a PCD's
+/// `VIEWPOINT`: PCL writes one for every scan), else none (orientation by propagation).
+fn viewpoint(args: &MeshArgs, file: &CloudFile) -> Option<Vec3> {
+    if args.viewpoint.is_some() {
+        return args.viewpoint;
+    }
+    let v = Vec3::from(file.cloud_from_sensor?.translation);
+    tracing::info!(
+        "{}: normals face the viewpoint the file records, {},{},{} (--viewpoint overrides it)",
+        args.cloud.display(),
+        v.x,
+        v.y,
+        v.z
+    );
+    Some(v)
+}
+
 /// What `--json` prints: the pipeline's report and what reading the file found.
 #[derive(serde::Serialize)]
 struct MeshOutput {
     /// Points of the file with a NaN or infinite coordinate, left out of the mesh.
     non_finite_points: usize,
+    /// Where the normals were made to face, `null` when they were oriented by propagation.
+    viewpoint: Option<[f32; 3]>,
     #[serde(flatten)]
     report: tacmesh::pipeline::MeshReport,
 }
@@ -124,13 +146,13 @@ struct ObjectReport {
 }
 
 /// `--objects`: segment the scene, mesh each object, write the meshes and `labels.txt`.
-fn mesh_objects(args: &MeshArgs, file: &CloudFile) -> anyhow::Result<()> {
+fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> anyhow::Result<()> {
     let cloud = &file.cloud;
     let dir = &args.output;
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     // Scans are in the sensor frame unless a viewpoint says otherwise.
-    let viewpoint = args.viewpoint.unwrap_or(Vec3::ZERO);
+    let viewpoint = viewpoint.unwrap_or(Vec3::ZERO);
     // The daemon's segmentation with its exact per-point settings: one scan has time for them,
     // and the live settings' 8 mm cells split PCL's mug from its handle.
     let segmentation = segment(
