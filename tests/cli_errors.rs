@@ -76,3 +76,46 @@ fn missing_sensor_file_says_no_such_file_once() {
         assert!(stderr.contains("/nonexistent/"), "{spec}: {stderr}");
     }
 }
+
+/// A voxel finer than the data's spacing leaves no neighbourhood with enough points; that is
+/// what the error says, with the voxel size that would do, not "too few points".
+#[test]
+fn voxel_finer_than_the_point_spacing_says_so() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("plane.xyz");
+    // A 40 × 40 grid, 1 cm apart, on a gentle slope.
+    let mut text = String::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let (x, y) = (i as f32 * 0.01, j as f32 * 0.01);
+            text += &format!("{x} {y} {}\n", 0.2 * x);
+        }
+    }
+    std::fs::write(&path, text).expect("write");
+    let out = path_str(&dir.path().join("out.ply")).to_owned();
+    let stderr = stderr_of(&["mesh", path_str(&path), "-o", &out, "--voxel-m", "0.001"]);
+    assert!(
+        stderr.contains("voxel size 0.001 m is finer than the points are spaced (0.01 m"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("at least 0.01 m"), "{stderr}");
+    assert!(!stderr.contains("too few points"), "{stderr}");
+}
+
+#[test]
+fn identical_points_say_they_coincide() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("same.xyz");
+    std::fs::write(&path, "0.5 0.25 1\n".repeat(100)).expect("write");
+    let out = path_str(&dir.path().join("out.ply")).to_owned();
+    for extra in [&[][..], &["--voxel-m", "0.01"][..]] {
+        let mut args = vec!["mesh", path_str(&path), "-o", &out];
+        args.extend(extra);
+        let stderr = stderr_of(&args);
+        assert!(
+            stderr.contains("all 100 points coincide, at 0.5,0.25,1"),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("voxel size 0 m"), "{stderr}");
+    }
+}

@@ -26,9 +26,14 @@ pub struct MeshArgs {
     /// the cloud's largest side]
     #[arg(long)]
     max_residual_m: Option<f32>,
-    /// Sensor position "x,y,z" in the cloud's frame, for one-view scans (orients normals towards
-    /// it) [default: the file's own (a PCD's VIEWPOINT); without one normals are oriented by
-    /// propagation]
+    /// Multiply the cloud's coordinates by FACTOR to make them metres: 0.001 for a cloud in
+    /// millimetres, 0.01 for centimetres. The mesh is written in metres, and --voxel-m,
+    /// --max-residual-m and --viewpoint are in metres too
+    #[arg(long, value_name = "FACTOR", value_parser = parse_scale, allow_hyphen_values = true)]
+    scale: Option<f32>,
+    /// Sensor position "x,y,z" in metres in the cloud's frame, for one-view scans (orients
+    /// normals towards it) [default: the file's own (a PCD's VIEWPOINT); without one normals
+    /// are oriented by propagation]
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
     /// Print one JSON object with face counts, the residual reached and per-stage milliseconds
@@ -54,6 +59,59 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
+fn parse_scale(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        _ => Err("expected a positive number, e.g. 0.001 for millimetres".into()),
+    }
+}
+
+/// The extents, metres, of what a depth camera can scan: from a small object a few centimetres
+/// across (1 cm allows for a part of one) to a room or a yard (about 20 m, beyond the range of
+/// any of the cameras tacmesh reads). A cloud outside is in other units, most likely
+/// millimetres.
+const PLAUSIBLE_EXTENT_M: std::ops::RangeInclusive<f32> = 0.01..=20.0;
+
+/// Multiplies the points, and the sensor position the file records, by `factor` (positive, so
+/// normals keep their direction).
+fn scale(file: &mut CloudFile, factor: f32) {
+    for p in &mut file.cloud.points {
+        *p *= factor;
+    }
+    if let Some(pose) = &mut file.cloud_from_sensor {
+        pose.translation *= factor;
+    }
+}
+
+/// Warns when the cloud's extent is not what a depth camera sees, and says how to fix it.
+fn warn_if_implausible(args: &MeshArgs, cloud: &tacmesh::PointCloud) {
+    let Some(extent_m) = tacmesh::pipeline::robust_extent_m(&cloud.points) else {
+        return;
+    };
+    let scaled = match args.scale {
+        Some(factor) => format!(" (after --scale {factor})"),
+        None => String::new(),
+    };
+    let (min, max) = PLAUSIBLE_EXTENT_M.into_inner();
+    if extent_m > max {
+        tracing::warn!(
+            "{}: the cloud is {extent_m:.0} m across{scaled}, more than a depth camera sees \
+             (up to about {max:.0} m): if its unit is millimetres, mesh it with --scale 0.001 \
+             (centimetres: --scale 0.01)",
+            args.cloud.display()
+        );
+    } else if extent_m < min {
+        tracing::warn!(
+            "{}: the cloud is {:.2} mm across{scaled}, less than a depth camera resolves \
+             (about {:.0} mm): if its unit is not metres, give --scale with the factor to \
+             metres (1000 for kilometres)",
+            args.cloud.display(),
+            extent_m * 1e3,
+            min * 1e3
+        );
+    }
+}
+
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     // With --objects in file order with the invalid points, so that labels.txt lines up with
     // the file; they are labelled 0 and meshed with no object.
@@ -62,7 +120,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     } else {
         NonFinite::Drop
     };
-    let file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
+    let mut file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
     if file.non_finite > 0 {
         tracing::info!(
             "{}: left out {} points with a NaN or infinite coordinate",
@@ -70,6 +128,10 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
             file.non_finite
         );
     }
+    if let Some(factor) = args.scale {
+        scale(&mut file, factor);
+    }
+    warn_if_implausible(&args, &file.cloud);
     let viewpoint = viewpoint(&args, &file);
     if args.objects {
         return mesh_objects(&args, &file, viewpoint);
