@@ -119,3 +119,32 @@ fn identical_points_say_they_coincide() {
         assert!(!stderr.contains("voxel size 0 m"), "{stderr}");
     }
 }
+
+/// `mesh --help` names every cloud extension the reader takes: the list in the reader's own
+/// error for an unknown extension.
+#[test]
+fn mesh_help_names_every_cloud_extension_the_reader_takes() {
+    let stderr = stderr_of(&["mesh", "scan.las", "-o", "/tmp/never.ply"]);
+    let supported = stderr
+        .split("point clouds can be ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no list of extensions: {stderr}"));
+    let extensions: Vec<&str> = supported
+        .split([',', ' ', '\n'])
+        .filter(|word| word.starts_with('.'))
+        .collect();
+    assert!(extensions.len() >= 5, "{stderr}");
+    let help = crate::util::tacmesh_ok(&["mesh", "--help"]);
+    // The CLOUD argument's own help, not `labels.txt` further down.
+    let cloud_help = help
+        .split("Arguments:")
+        .nth(1)
+        .and_then(|rest| rest.split("Options:").next())
+        .unwrap_or_else(|| panic!("no CLOUD argument: {help}"));
+    for extension in extensions {
+        assert!(
+            cloud_help.contains(extension),
+            "mesh --help omits {extension}: {cloud_help}"
+        );
+    }
+}

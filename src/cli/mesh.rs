@@ -7,14 +7,16 @@ use tacmesh::glam::Vec3;
 use tacmesh::pipeline::{mesh_cloud, Length, MeshConfig};
 use tacmesh::segment::{segment, SegmentConfig};
 
-/// Mesh one point cloud (PLY, PCD or XYZ) into one simplified mesh (PLY or OBJ).
+/// Mesh one point cloud (PLY, PCD, or XYZ text: .xyz, .txt, .pts) into one simplified mesh (PLY
+/// or OBJ).
 ///
 /// Reconstructs the surface with marching cubes over a smoothed signed distance near the
 /// points, then simplifies by edge collapse until any further collapse would move the surface
 /// farther than the residual bound from the reconstruction.
 #[derive(Debug, Args)]
 pub struct MeshArgs {
-    /// Input point cloud: .ply, .pcd, .xyz
+    /// Input point cloud: .ply, .pcd, or XYZ text in .xyz, .txt or .pts (x y z or x y z nx ny
+    /// nz per line, separated by spaces or commas)
     cloud: PathBuf,
     /// Output mesh: .ply or .obj (a folder with --objects)
     #[arg(short, long)]
@@ -36,7 +38,8 @@ pub struct MeshArgs {
     /// are oriented by propagation]
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
-    /// Print one JSON object with face counts, the residual reached and per-stage milliseconds
+    /// Print one JSON object with face counts, the residual reached, per-stage milliseconds, the
+    /// points left out for a NaN or infinite coordinate and the viewpoint used
     #[arg(long)]
     json: bool,
     /// Treat CLOUD as a scene: find its support planes and objects with the daemon's
