@@ -15,10 +15,16 @@ fn stderr_of(args: &[&str]) -> String {
     stderr
 }
 
+/// Named once, with the OS's reason once: the context `main` prints adds no second copy.
 #[test]
-fn missing_cloud_file_is_named() {
+fn missing_cloud_file_is_named_once_with_its_reason() {
     let stderr = stderr_of(&["mesh", "/nonexistent/cloud.ply", "-o", "/tmp/never.ply"]);
-    assert!(stderr.contains("/nonexistent/cloud.ply"), "{stderr}");
+    assert_eq!(
+        stderr.matches("/nonexistent/cloud.ply").count(),
+        1,
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
 }
 
 #[test]
@@ -118,6 +124,96 @@ fn a_missing_file_or_daemon_is_said_once() {
             stderr.matches("os error 2").count(),
             1,
             "tacmesh {args:?}: {stderr}"
+        );
+    }
+}
+
+/// A missing recording, bag or scene file is reported with the OS's reason once: the error
+/// chain printed by `main` must not repeat it.
+#[test]
+fn missing_sensor_file_says_no_such_file_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let socket = path_str(&dir.path().join("tacmesh.sock")).to_owned();
+    for spec in [
+        "replay:/nonexistent/recording.oni",
+        "replay:/nonexistent/recording.bag",
+        "replay:/nonexistent/cloud.pcd",
+        "sim:/nonexistent/scene.toml",
+    ] {
+        let stderr = stderr_of(&["run", "--sensor", spec, "--socket", &socket]);
+        assert_eq!(stderr.matches("os error 2").count(), 1, "{spec}: {stderr}");
+        assert!(stderr.contains("/nonexistent/"), "{spec}: {stderr}");
+    }
+}
+
+/// A voxel finer than the data's spacing leaves no neighbourhood with enough points; that is
+/// what the error says, with the voxel size that would do, not "too few points".
+#[test]
+fn voxel_finer_than_the_point_spacing_says_so() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("plane.xyz");
+    // A 40 × 40 grid, 1 cm apart, on a gentle slope.
+    let mut text = String::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let (x, y) = (i as f32 * 0.01, j as f32 * 0.01);
+            text += &format!("{x} {y} {}\n", 0.2 * x);
+        }
+    }
+    std::fs::write(&path, text).expect("write");
+    let out = path_str(&dir.path().join("out.ply")).to_owned();
+    let stderr = stderr_of(&["mesh", path_str(&path), "-o", &out, "--voxel-m", "0.001"]);
+    assert!(
+        stderr.contains("voxel size 0.001 m is finer than the points are spaced (0.01 m"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("at least 0.01 m"), "{stderr}");
+    assert!(!stderr.contains("too few points"), "{stderr}");
+}
+
+#[test]
+fn identical_points_say_they_coincide() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("same.xyz");
+    std::fs::write(&path, "0.5 0.25 1\n".repeat(100)).expect("write");
+    let out = path_str(&dir.path().join("out.ply")).to_owned();
+    for extra in [&[][..], &["--voxel-m", "0.01"][..]] {
+        let mut args = vec!["mesh", path_str(&path), "-o", &out];
+        args.extend(extra);
+        let stderr = stderr_of(&args);
+        assert!(
+            stderr.contains("all 100 points coincide, at 0.5,0.25,1"),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("voxel size 0 m"), "{stderr}");
+    }
+}
+
+/// `mesh --help` names every cloud extension the reader takes: the list in the reader's own
+/// error for an unknown extension.
+#[test]
+fn mesh_help_names_every_cloud_extension_the_reader_takes() {
+    let stderr = stderr_of(&["mesh", "scan.las", "-o", "/tmp/never.ply"]);
+    let supported = stderr
+        .split("point clouds can be ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no list of extensions: {stderr}"));
+    let extensions: Vec<&str> = supported
+        .split([',', ' ', '\n'])
+        .filter(|word| word.starts_with('.'))
+        .collect();
+    assert!(extensions.len() >= 5, "{stderr}");
+    let help = crate::util::tacmesh_ok(&["mesh", "--help"]);
+    // The CLOUD argument's own help, not `labels.txt` further down.
+    let cloud_help = help
+        .split("Arguments:")
+        .nth(1)
+        .and_then(|rest| rest.split("Options:").next())
+        .unwrap_or_else(|| panic!("no CLOUD argument: {help}"));
+    for extension in extensions {
+        assert!(
+            cloud_help.contains(extension),
+            "mesh --help omits {extension}: {cloud_help}"
         );
     }
 }

@@ -1,7 +1,7 @@
 //! The offline pipeline end to end through the CLI: sample a shape with the paper's 20 mm
 //! noise, mesh it with the defaults, judge it against the ground truth.
 
-use crate::util::{path_str, tacmesh_json, tacmesh_ok};
+use crate::util::{path_str, tacmesh, tacmesh_json, tacmesh_logging, tacmesh_ok};
 
 /// Samples `shape`, meshes it, evaluates it; returns (faces, recon_faces, mhe).
 fn sample_mesh_eval(shape: &str, seed: &str) -> (u64, u64, f64) {
@@ -107,4 +107,116 @@ fn readme_offline_example_runs_and_leaves_no_files_behind() {
     );
     let left: Vec<_> = std::fs::read_dir(cwd.path()).expect("lists").collect();
     assert!(left.is_empty(), "the example left {left:?} behind");
+}
+
+/// A scanner's misses written as `nan` and `inf` in an ascii PLY are left out and counted, in
+/// `--json` and in the log, as in every other format; they do not fail the file.
+#[test]
+fn non_finite_points_in_an_ascii_ply_are_left_out_and_counted() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let xyz = dir.path().join("cube.xyz");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "cube",
+        "--points",
+        "20000",
+        "--seed",
+        "1",
+        "-o",
+        path_str(&xyz),
+    ]);
+    let lines: Vec<String> = std::fs::read_to_string(&xyz)
+        .expect("sampled cloud")
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n",
+        lines.len() + 2
+    );
+    for (i, line) in lines.iter().enumerate() {
+        if i == 100 {
+            ply += "nan nan nan\n0.1 inf 0.2\n";
+        }
+        ply += line;
+        ply.push('\n');
+    }
+    let cloud = dir.path().join("cube.ply");
+    std::fs::write(&cloud, ply).expect("write the ascii PLY");
+    let mesh = dir.path().join("mesh.ply");
+    let out = tacmesh_logging(
+        &["mesh", path_str(&cloud), "-o", path_str(&mesh), "--json"],
+        "info",
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(report["non_finite_points"], 2, "{report}");
+    assert_eq!(report["points"], lines.len(), "{report}");
+    assert!(
+        stderr.contains("left out 2 points with a NaN or infinite coordinate"),
+        "{stderr}"
+    );
+}
+
+/// The paper's 1 m torus written in millimetres meshed as a 954 m object without a word; now
+/// a warning names the fix, `--scale 0.001`, and that fix meshes it as the metre-sized torus.
+#[test]
+fn millimetre_cloud_is_warned_about_and_scale_makes_it_metres() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let metres = dir.path().join("torus.xyz");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "torus",
+        "--points",
+        "20000",
+        "--seed",
+        "2",
+        "-o",
+        path_str(&metres),
+    ]);
+    let millimetres: String = std::fs::read_to_string(&metres)
+        .expect("sampled cloud")
+        .lines()
+        .map(|line| {
+            let mm: Vec<String> = line
+                .split_whitespace()
+                .map(|v| (v.parse::<f64>().expect("a number") * 1000.0).to_string())
+                .collect();
+            mm.join(" ") + "\n"
+        })
+        .collect();
+    let cloud = dir.path().join("torus_mm.xyz");
+    std::fs::write(&cloud, millimetres).expect("write the millimetre cloud");
+    let mesh = dir.path().join("mesh.ply");
+    let mesh_args = |scale: Option<&str>| {
+        let mut args = vec!["mesh", path_str(&cloud), "-o", path_str(&mesh), "--json"];
+        if let Some(factor) = scale {
+            args.extend(["--scale", factor]);
+        }
+        let out = tacmesh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        let report: serde_json::Value =
+            serde_json::from_slice(&out.stdout).expect("one JSON object");
+        (report["extent_m"].as_f64().expect("extent"), stderr)
+    };
+
+    let (extent_m, stderr) = mesh_args(None);
+    assert!(extent_m > 900.0, "{extent_m}");
+    assert!(
+        stderr.contains("m across, more than a depth camera sees"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--scale 0.001"), "{stderr}");
+
+    let (extent_m, stderr) = mesh_args(Some("0.001"));
+    assert!((0.9..1.0).contains(&extent_m), "{extent_m}");
+    assert!(!stderr.contains("WARN"), "{stderr}");
+    let eval = tacmesh_json(&["eval", "torus", path_str(&mesh), "--json"]);
+    let mhe = eval["mhe"].as_f64().expect("mhe");
+    assert!(mhe <= 0.0143, "torus MHE {mhe} after --scale 0.001");
 }

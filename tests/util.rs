@@ -5,9 +5,14 @@ use std::process::{Command, Output};
 
 /// Runs `tacmesh` with `args`; returns its output whatever the exit status.
 pub fn tacmesh(args: &[&str]) -> Output {
+    tacmesh_logging(args, "warn")
+}
+
+/// As [`tacmesh`], logging at `level` (a `RUST_LOG` filter) on standard error.
+pub fn tacmesh_logging(args: &[&str], level: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tacmesh"))
         .args(args)
-        .env("RUST_LOG", "warn")
+        .env("RUST_LOG", level)
         .output()
         .expect("the tacmesh binary runs")
 }

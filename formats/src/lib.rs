@@ -1,7 +1,9 @@
 //! Point-cloud and mesh files: PLY, PCD, XYZ and OBJ.
 //!
 //! Entry points, each choosing the format by the file's extension:
-//! - [`read_cloud`]: `.ply`, `.pcd`, `.xyz`/`.txt`/`.pts` to a [`PointCloud`] of finite points.
+//! - [`read_cloud_file`]: `.ply`, `.pcd`, `.xyz`/`.txt`/`.pts` to a [`CloudFile`]: the points,
+//!   how many had a NaN or infinite coordinate (dropped or kept, one rule for every format),
+//!   and the sensor pose when the file records one. [`read_cloud`] is its finite points.
 //! - [`read_mesh`]: `.obj`, `.ply` to a [`TriMesh`] (polygons fan-triangulated).
 //! - [`write_cloud`]: `.ply` (binary little-endian) or `.xyz` (text).
 //! - [`write_mesh`]: `.ply` (binary little-endian) or `.obj` (text).
@@ -22,6 +24,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+use glam::Affine3A;
 use tacmesh_source::{PointCloud, TriMesh};
 
 /// Why a file could not be read or written.
@@ -63,29 +66,44 @@ const MESH_READ_EXTENSIONS: &str = ".obj or .ply";
 const CLOUD_WRITE_EXTENSIONS: &str = ".ply or .xyz";
 const MESH_WRITE_EXTENSIONS: &str = ".ply or .obj";
 
-/// Reads a point cloud, choosing the format by extension, and drops every point with a
-/// non-finite coordinate (an organised PCD's invalid pixels, for one). Normals are kept when
-/// the file has them: PLY `nx ny nz`, PCD `normal_x normal_y normal_z`, XYZ's 6-column form.
-pub fn read_cloud(path: &Path) -> Result<PointCloud, FormatError> {
-    let mut cloud = read_cloud_in_file_order(path)?;
-    let dropped = cloud.retain_finite();
-    if dropped > 0 {
-        tracing::debug!(
-            "{}: dropped {dropped} points with non-finite coordinates",
-            path.display()
-        );
-    }
-    Ok(cloud)
+/// What to do with the points of a file that have a NaN or infinite coordinate (an organised
+/// PCD's invalid pixels, a scanner's misses written as `nan`). Every format follows the same
+/// rule: such a point is read, never an error, and is counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NonFinite {
+    /// Leave them out (what meshing wants).
+    Drop,
+    /// Keep them in place, so that per-point results (labels) line up with the file.
+    Keep,
 }
 
-/// As [`read_cloud`], but every point of the file in its order, non-finite ones included, so
-/// that per-point results (labels) line up with the file.
-pub fn read_cloud_in_file_order(path: &Path) -> Result<PointCloud, FormatError> {
+/// A point cloud file as read by [`read_cloud_file`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CloudFile {
+    /// The points (with normals when the file has them), in file order.
+    pub cloud: PointCloud,
+    /// Points with a NaN or infinite coordinate: dropped or kept, as asked.
+    pub non_finite: usize,
+    /// The sensor's pose in the cloud's frame, when the file records one (PCD `VIEWPOINT`);
+    /// its translation is where the scan was seen from.
+    pub cloud_from_sensor: Option<Affine3A>,
+}
+
+/// Reads a point cloud, choosing the format by extension: `.ply`, `.pcd`, or `.xyz` (also
+/// read from `.txt` and `.pts`). Normals are kept when the file has them: PLY `nx ny nz`, PCD
+/// `normal_x normal_y normal_z`, XYZ's 6-column form. Points with a non-finite coordinate are
+/// dropped or kept as `non_finite` says, and counted either way.
+pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, FormatError> {
     let name = path.display().to_string();
-    let parse: fn(&[u8], &str) -> Result<PointCloud, FormatError> = match extension(path).as_str() {
-        "ply" => ply::parse_cloud,
-        "pcd" => |bytes, name| pcd::parse(bytes, name).map(pcd::PcdCloud::into_cloud),
-        "xyz" | "txt" | "pts" => xyz::parse,
+    // Only PCD records a sensor pose; PLY and XYZ have no standard place for one.
+    let (mut cloud, cloud_from_sensor) = match extension(path).as_str() {
+        "ply" => (ply::parse_cloud(&read_bytes(path)?, &name)?, None),
+        "pcd" => {
+            let pcd = pcd::parse(&read_bytes(path)?, &name)?;
+            let pose = pcd.cloud_from_sensor;
+            (pcd.into_cloud(), pose)
+        }
+        "xyz" | "txt" | "pts" => (xyz::parse(&read_bytes(path)?, &name)?, None),
         _ => {
             return Err(FormatError::UnsupportedExtension {
                 name,
@@ -94,7 +112,34 @@ pub fn read_cloud_in_file_order(path: &Path) -> Result<PointCloud, FormatError> 
             })
         }
     };
-    parse(&read_bytes(path)?, &name)
+    let count = match non_finite {
+        NonFinite::Drop => cloud.retain_finite(),
+        NonFinite::Keep => cloud.points.iter().filter(|p| !p.is_finite()).count(),
+    };
+    Ok(CloudFile {
+        cloud,
+        non_finite: count,
+        cloud_from_sensor,
+    })
+}
+
+/// [`read_cloud_file`]'s points without those with a non-finite coordinate.
+pub fn read_cloud(path: &Path) -> Result<PointCloud, FormatError> {
+    let file = read_cloud_file(path, NonFinite::Drop)?;
+    if file.non_finite > 0 {
+        tracing::debug!(
+            "{}: dropped {} points with a NaN or infinite coordinate",
+            path.display(),
+            file.non_finite
+        );
+    }
+    Ok(file.cloud)
+}
+
+/// [`read_cloud_file`]'s points, every one of the file in its order, non-finite ones
+/// included, so that per-point results (labels) line up with the file.
+pub fn read_cloud_in_file_order(path: &Path) -> Result<PointCloud, FormatError> {
+    read_cloud_file(path, NonFinite::Keep).map(|file| file.cloud)
 }
 
 /// Reads a triangle mesh, choosing the format by extension. Vertices keep the file's order.

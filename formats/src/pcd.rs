@@ -7,7 +7,8 @@
 //!
 //! Entry points:
 //! - [`parse`] (bytes) and [`read_pcd`] (a file) to a [`PcdCloud`], which keeps the organised
-//!   grid: points in file order, invalid ones left as NaN, with labels and colours if present.
+//!   grid: points in file order, invalid ones left as NaN, with labels and colours if present,
+//!   and the sensor pose of the `VIEWPOINT` line.
 //! - [`PcdCloud::into_cloud`] for the plain points (and normals).
 //!
 //! Fields are typed `F` (float, 4 or 8 bytes), `I` or `U` (signed or unsigned integers of 1, 2,
@@ -17,7 +18,7 @@
 use std::borrow::Cow;
 use std::path::Path;
 
-use glam::Vec3;
+use glam::{Affine3A, Quat, Vec3};
 use tacmesh_source::PointCloud;
 
 use crate::FormatError;
@@ -35,6 +36,9 @@ pub struct PcdCloud {
     pub labels: Option<Vec<u32>>,
     /// The raw bits of an `rgb` or `rgba` field (PCL packs them as 0xAARRGGBB), one per point.
     pub rgba: Option<Vec<u32>>,
+    /// The sensor's pose in the cloud's frame, from `VIEWPOINT tx ty tz qw qx qy qz` (PCL's
+    /// `sensor_origin_` and `sensor_orientation_`); `None` when the header has no such line.
+    pub cloud_from_sensor: Option<Affine3A>,
 }
 
 impl PcdCloud {
@@ -89,6 +93,7 @@ struct Header {
     data_start: usize,
     /// Line number of the first line after the DATA line, for ascii data.
     data_line: usize,
+    cloud_from_sensor: Option<Affine3A>,
 }
 
 impl Header {
@@ -119,6 +124,7 @@ struct HeaderLines {
     width: Option<u32>,
     height: Option<u32>,
     points: Option<u64>,
+    viewpoint: Option<Affine3A>,
 }
 
 fn parse_header(bytes: &[u8], name: &str) -> Result<Header, FormatError> {
@@ -175,7 +181,8 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<Header, FormatError> {
             u32::try_from(single()?).map_err(|_| bad("too large"))
         };
         match keyword {
-            "VERSION" | "VIEWPOINT" => {}
+            "VERSION" => {}
+            "VIEWPOINT" => lines.viewpoint = Some(viewpoint(&values).map_err(|what| bad(&what))?),
             "FIELDS" | "COLUMNS" => {
                 lines.fields = Some(values.iter().map(|v| v.to_string()).collect())
             }
@@ -289,7 +296,32 @@ fn check_header(
         data,
         data_start,
         data_line,
+        cloud_from_sensor: lines.viewpoint,
     })
+}
+
+/// The pose a VIEWPOINT line's seven numbers `tx ty tz qw qx qy qz` give; the quaternion need
+/// not be normalised (PCL normalises it too), but must not be zero.
+fn viewpoint(values: &[&str]) -> Result<Affine3A, String> {
+    let numbers: Vec<f32> = values
+        .iter()
+        .map(|v| v.parse().map_err(|_| format!("{v:?} is not a number")))
+        .collect::<Result<_, _>>()?;
+    let [tx, ty, tz, qw, qx, qy, qz] = numbers[..] else {
+        return Err(format!(
+            "expected 7 numbers (tx ty tz qw qx qy qz), got {}",
+            numbers.len()
+        ));
+    };
+    let rotation = Quat::from_xyzw(qx, qy, qz, qw);
+    let translation = Vec3::new(tx, ty, tz);
+    if !(translation.is_finite() && rotation.is_finite() && rotation.length() > 1e-6) {
+        return Err("the position must be finite and the quaternion finite and non-zero".into());
+    }
+    Ok(Affine3A::from_rotation_translation(
+        rotation.normalize(),
+        translation,
+    ))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -628,6 +660,7 @@ pub fn parse(bytes: &[u8], name: &str) -> Result<PcdCloud, FormatError> {
         normals,
         labels,
         rgba,
+        cloud_from_sensor: header.cloud_from_sensor,
     })
 }
 
@@ -683,6 +716,33 @@ mod tests {
         bytes.extend(b"1 2 3 4\n".repeat(11));
         let err = parse(&bytes, "n.pcd").unwrap_err().to_string();
         assert_eq!(err, "n.pcd: line 11 ends before field h");
+    }
+
+    #[test]
+    fn viewpoint_line_gives_the_sensor_pose() {
+        let mut bytes = header("x y z", "4 4 4", "F F F", 0, "ascii");
+        bytes.splice(0..0, b"VIEWPOINT 1 2 -3 0 1 0 0\n".iter().copied());
+        let pose = parse(&bytes, "v.pcd").unwrap().cloud_from_sensor.unwrap();
+        assert_eq!(pose.translation, Vec3::new(1.0, 2.0, -3.0).into());
+        // qw = 0, qx = 1: half a turn about x.
+        assert!(pose.transform_vector3(Vec3::Y).abs_diff_eq(-Vec3::Y, 1e-6));
+    }
+
+    #[test]
+    fn header_without_viewpoint_has_no_sensor_pose() {
+        let bytes = header("x y z", "4 4 4", "F F F", 0, "ascii");
+        assert_eq!(parse(&bytes, "n.pcd").unwrap().cloud_from_sensor, None);
+    }
+
+    #[test]
+    fn viewpoint_with_six_numbers_is_rejected() {
+        let mut bytes = header("x y z", "4 4 4", "F F F", 0, "ascii");
+        bytes.splice(0..0, b"VIEWPOINT 0 0 0 1 0 0\n".iter().copied());
+        let err = parse(&bytes, "s.pcd").unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "s.pcd: header line 1 (VIEWPOINT): expected 7 numbers (tx ty tz qw qx qy qz), got 6"
+        );
     }
 
     #[test]

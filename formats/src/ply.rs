@@ -1,6 +1,7 @@
 //! PLY, the Stanford polygon format: a text header declaring elements and their properties,
-//! then the elements in ascii, binary little-endian or binary big-endian. Parsed and written
-//! with `ply-rs-bw`.
+//! then the elements in ascii, binary little-endian or binary big-endian. The header and binary
+//! payloads are parsed, and files written, with `ply-rs-bw`; ascii payloads are read here, so
+//! that `nan` and `inf` are numbers as in every other format.
 //!
 //! Entry points:
 //! - [`parse_cloud`]: the `vertex` element's x y z (float or double), and nx ny nz when all
@@ -133,6 +134,10 @@ impl PropertyAccess for FaceRecord {
     fn set_list_int(&mut self, property: &str, values: Vec<i32>) -> PropertyAccessResult {
         let values: Vec<i64> = values.into_iter().map(i64::from).collect();
         self.set_signed(property, &values)
+    }
+
+    fn set_list_uint(&mut self, property: &str, values: Vec<u32>) -> PropertyAccessResult {
+        self.set_unsigned(property, &values)
     }
 
     fn begin_list_uint(&mut self, property: &str, _len: usize) -> BeginList<'_, u32> {
@@ -336,6 +341,174 @@ fn scalar_size(t: &ScalarType) -> usize {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Ascii payload. `ply-rs-bw`'s grammar takes only digits, signs, a point and an exponent, so
+// it refuses `nan`, `inf`, `.5` and `1.`, which scanners and numpy write; this reader takes
+// every number Rust's parsers take, so that a non-finite point reads as one (and is dropped
+// by `read_cloud` like a binary file's) instead of failing the file.
+
+/// The non-blank lines of an ascii payload with their line numbers in the file.
+struct AsciiLines<'a> {
+    rest: &'a [u8],
+    /// The number in the file of the first line of `rest`.
+    line_number: usize,
+}
+
+impl<'a> AsciiLines<'a> {
+    fn new(body: &'a [u8], first_line: usize) -> Self {
+        Self {
+            rest: body,
+            line_number: first_line,
+        }
+    }
+
+    /// The next non-blank line and its number; `Ok(None)` at the end.
+    fn next_line(&mut self, name: &str) -> Result<Option<(usize, &'a str)>, FormatError> {
+        while !self.rest.is_empty() {
+            let end = self
+                .rest
+                .iter()
+                .position(|&b| b == b'\n')
+                .unwrap_or(self.rest.len());
+            let (line, number) = (&self.rest[..end], self.line_number);
+            self.rest = self.rest.get(end + 1..).unwrap_or_default();
+            self.line_number += 1;
+            let text = std::str::from_utf8(line)
+                .map_err(|_| FormatError::malformed(name, format!("line {number} is not text")))?;
+            if !text.trim().is_empty() {
+                return Ok(Some((number, text)));
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// Reads `def.count` lines of one element, each its properties in header order (a list as its
+/// length, then its items). Tokens after the last property are ignored, as `ply-rs-bw` does.
+fn read_ascii_element<E: PropertyAccess>(
+    lines: &mut AsciiLines,
+    element_name: &str,
+    def: &ElementDef,
+    name: &str,
+) -> Result<Vec<E>, FormatError> {
+    // `check_counts` found a line per item, so `count` is bounded by the file's size.
+    let mut records = Vec::with_capacity(def.count);
+    for item in 0..def.count {
+        let Some((line_number, text)) = lines.next_line(name)? else {
+            return Err(FormatError::malformed(
+                name,
+                format!(
+                    "the file ends after {item} of the {} {element_name} lines its header declares",
+                    def.count
+                ),
+            ));
+        };
+        let mut tokens = text.split_whitespace();
+        let mut record = E::new();
+        for (property, p) in &def.properties {
+            let bad = |token: Option<&str>, what: &str| {
+                FormatError::malformed(
+                    name,
+                    match token {
+                        Some(token) => format!(
+                            "line {line_number}: {token:?} is not a valid {what} for \
+                             {element_name} property {property} ({})",
+                            type_name(&p.data_type)
+                        ),
+                        None => format!(
+                            "line {line_number} ends before {element_name} property {property}"
+                        ),
+                    },
+                )
+            };
+            match &p.data_type {
+                PropertyType::Scalar(t) => {
+                    let token = tokens.next();
+                    set_ascii_scalar(&mut record, property, t, token.unwrap_or_default())
+                        .ok_or_else(|| bad(token, "value"))?;
+                }
+                PropertyType::List(count_type, item_type) => {
+                    let token = tokens.next();
+                    let len = token
+                        .and_then(|t| list_length(t, count_type))
+                        .ok_or_else(|| bad(token, "list length"))?;
+                    let items: Vec<&str> = tokens.by_ref().take(len as usize).collect();
+                    if (items.len() as u64) < len {
+                        return Err(FormatError::malformed(
+                            name,
+                            format!(
+                                "line {line_number}: {element_name} property {property} \
+                                 declares {len} items but the line has {}",
+                                items.len()
+                            ),
+                        ));
+                    }
+                    set_ascii_list(&mut record, property, item_type, &items)
+                        .map_err(|token| bad(Some(token), "list item"))?;
+                }
+            }
+        }
+        records.push(record);
+    }
+    Ok(records)
+}
+
+/// A list's length as written, if it is a whole number the count type holds.
+fn list_length(token: &str, count_type: &ScalarType) -> Option<u64> {
+    let len: u64 = token.parse().ok()?;
+    let bits = 8 * scalar_size(count_type) as u32;
+    let signed = matches!(
+        count_type,
+        ScalarType::Char | ScalarType::Short | ScalarType::Int
+    );
+    // A shift by 64 (a `double` count, which only a strange file has) is no bound at all.
+    let over = len.checked_shr(bits - u32::from(signed)).unwrap_or(0);
+    (over == 0).then_some(len)
+}
+
+/// Parses `token` as `t` and hands it to the record; `None` if it does not parse.
+fn set_ascii_scalar<E: PropertyAccess>(
+    record: &mut E,
+    property: &str,
+    t: &ScalarType,
+    token: &str,
+) -> Option<()> {
+    match t {
+        ScalarType::Char => record.set_char(property, token.parse().ok()?),
+        ScalarType::UChar => record.set_uchar(property, token.parse().ok()?),
+        ScalarType::Short => record.set_short(property, token.parse().ok()?),
+        ScalarType::UShort => record.set_ushort(property, token.parse().ok()?),
+        ScalarType::Int => record.set_int(property, token.parse().ok()?),
+        ScalarType::UInt => record.set_uint(property, token.parse().ok()?),
+        ScalarType::Float => record.set_float(property, token.parse().ok()?),
+        ScalarType::Double => record.set_double(property, token.parse().ok()?),
+    };
+    Some(())
+}
+
+/// Parses every token as `t` and hands the list to the record; the first bad token on error.
+fn set_ascii_list<'t, E: PropertyAccess>(
+    record: &mut E,
+    property: &str,
+    t: &ScalarType,
+    tokens: &[&'t str],
+) -> Result<(), &'t str> {
+    fn all<'t, T: std::str::FromStr>(tokens: &[&'t str]) -> Result<Vec<T>, &'t str> {
+        tokens.iter().map(|t| t.parse().map_err(|_| *t)).collect()
+    }
+    match t {
+        ScalarType::Char => record.set_list_char(property, all(tokens)?),
+        ScalarType::UChar => record.set_list_uchar(property, all(tokens)?),
+        ScalarType::Short => record.set_list_short(property, all(tokens)?),
+        ScalarType::UShort => record.set_list_ushort(property, all(tokens)?),
+        ScalarType::Int => record.set_list_int(property, all(tokens)?),
+        ScalarType::UInt => record.set_list_uint(property, all(tokens)?),
+        ScalarType::Float => record.set_list_float(property, all(tokens)?),
+        ScalarType::Double => record.set_list_double(property, all(tokens)?),
+    };
+    Ok(())
+}
+
 /// Reads the header, checks it against the bytes after it, then parses every element in
 /// order: `vertex` into records, `face` too when `faces_wanted`, the rest only to skip them.
 fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, FormatError> {
@@ -356,6 +529,34 @@ fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, Format
 
     let mut vertices = Vec::new();
     let mut faces = faces_wanted.then(Vec::new);
+    if header.encoding == Encoding::Ascii {
+        let body_start = bytes.len() - body.len();
+        let header_lines = bytes[..body_start].iter().filter(|&&b| b == b'\n').count();
+        let mut lines = AsciiLines::new(body, header_lines + 1);
+        for (element_name, def) in &header.elements {
+            match (element_name.as_str(), &mut faces) {
+                ("vertex", _) => {
+                    vertices = read_ascii_element(&mut lines, element_name, def, name)?;
+                }
+                ("face", Some(faces)) => {
+                    *faces = read_ascii_element(&mut lines, element_name, def, name)?;
+                }
+                _ => {
+                    read_ascii_element::<Ignored>(&mut lines, element_name, def, name)?;
+                }
+            }
+        }
+        if let Some((line_number, _)) = lines.next_line(name)? {
+            tracing::debug!(
+                "{name}: ignored the lines from {line_number} on, after the last element"
+            );
+        }
+        return Ok(Contents {
+            vertices,
+            has_normals,
+            faces,
+        });
+    }
     for (element_name, def) in &header.elements {
         match (element_name.as_str(), &mut faces) {
             ("vertex", _) => {
@@ -630,6 +831,40 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("vertex property y is"), "{err}");
+    }
+
+    #[test]
+    fn ascii_nan_inf_and_bare_decimal_points_are_numbers() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n\
+            property float y\nproperty double z\nend_header\n.5 1. -2\nNaN 0 0\n\n0 -inf +1e3\n";
+        let cloud = parse_cloud(text.as_bytes(), "n.ply").unwrap();
+        assert_eq!(cloud.points[0], Vec3::new(0.5, 1.0, -2.0));
+        assert!(cloud.points[1].x.is_nan());
+        assert_eq!(cloud.points[2], Vec3::new(0.0, f32::NEG_INFINITY, 1000.0));
+    }
+
+    #[test]
+    fn ascii_word_is_rejected_with_its_line_and_property() {
+        let text = ASCII_QUAD.replace("1 1 0", "1 one 0");
+        let err = parse_mesh(text.as_bytes(), "w.ply")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "w.ply: line 12: \"one\" is not a valid value for vertex property y (float)"
+        );
+    }
+
+    #[test]
+    fn ascii_face_shorter_than_its_length_is_rejected() {
+        let text = ASCII_QUAD.replace("4 0 1 2 3", "4 0 1 2");
+        let err = parse_mesh(text.as_bytes(), "f.ply")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "f.ply: line 14: face property vertex_indices declares 4 items but the line has 3"
+        );
     }
 
     #[test]

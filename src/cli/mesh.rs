@@ -2,18 +2,21 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use tacmesh::formats::{read_cloud_file, CloudFile, NonFinite};
 use tacmesh::glam::Vec3;
 use tacmesh::pipeline::{mesh_cloud, Length, MeshConfig};
 use tacmesh::segment::{segment, SegmentConfig};
 
-/// Mesh one point cloud (PLY, PCD or XYZ) into one simplified mesh (PLY or OBJ).
+/// Mesh one point cloud (PLY, PCD, or XYZ text: .xyz, .txt, .pts) into one simplified mesh (PLY
+/// or OBJ).
 ///
 /// Reconstructs the surface with marching cubes over a smoothed signed distance near the
 /// points, then simplifies by edge collapse until any further collapse would move the surface
 /// farther than the residual bound from the reconstruction.
 #[derive(Debug, Args)]
 pub struct MeshArgs {
-    /// Input point cloud: .ply, .pcd, .xyz
+    /// Input point cloud: .ply, .pcd, or XYZ text in .xyz, .txt or .pts (x y z or x y z nx ny
+    /// nz per line, separated by spaces or commas)
     cloud: PathBuf,
     /// Output mesh: .ply or .obj (a folder with --objects)
     #[arg(short, long)]
@@ -25,11 +28,18 @@ pub struct MeshArgs {
     /// the cloud's largest side]
     #[arg(long)]
     max_residual_m: Option<f32>,
-    /// Sensor position "x,y,z" in the cloud's frame, for one-view scans (orients normals towards
-    /// it); without it normals are oriented by propagation
-    #[arg(long, value_parser = parse_vec3)]
+    /// Multiply the cloud's coordinates by FACTOR to make them metres: 0.001 for a cloud in
+    /// millimetres, 0.01 for centimetres. The mesh is written in metres, and --voxel-m,
+    /// --max-residual-m and --viewpoint are in metres too
+    #[arg(long, value_name = "FACTOR", value_parser = parse_scale, allow_hyphen_values = true)]
+    scale: Option<f32>,
+    /// Sensor position "x,y,z" in metres in the cloud's frame, for one-view scans (orients
+    /// normals towards it) [default: the file's own (a PCD's VIEWPOINT); without one normals
+    /// are oriented by propagation]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
-    /// Print one JSON object with face counts, the residual reached and per-stage milliseconds
+    /// Print one JSON object with face counts, the residual reached, per-stage milliseconds, the
+    /// points left out for a NaN or infinite coordinate and the viewpoint used
     #[arg(long)]
     json: bool,
     /// Treat CLOUD as a scene: find its support planes and objects with the daemon's
@@ -52,17 +62,86 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
-pub fn run(args: MeshArgs) -> anyhow::Result<()> {
-    if args.objects {
-        // In file order with invalid points, so that labels.txt lines up with the file.
-        let cloud = tacmesh::formats::read_cloud_in_file_order(&args.cloud)
-            .with_context(|| format!("reading point cloud {}", args.cloud.display()))?;
-        return mesh_objects(&args, &cloud);
+fn parse_scale(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        _ => Err("expected a positive number, e.g. 0.001 for millimetres".into()),
     }
-    let cloud = tacmesh::formats::read_cloud(&args.cloud)
-        .with_context(|| format!("reading point cloud {}", args.cloud.display()))?;
+}
+
+/// The extents, metres, of what a depth camera can scan: from a small object a few centimetres
+/// across (1 cm allows for a part of one) to a room or a yard (about 20 m, beyond the range of
+/// any of the cameras tacmesh reads). A cloud outside is in other units, most likely
+/// millimetres.
+const PLAUSIBLE_EXTENT_M: std::ops::RangeInclusive<f32> = 0.01..=20.0;
+
+/// Multiplies the points, and the sensor position the file records, by `factor` (positive, so
+/// normals keep their direction).
+fn scale(file: &mut CloudFile, factor: f32) {
+    for p in &mut file.cloud.points {
+        *p *= factor;
+    }
+    if let Some(pose) = &mut file.cloud_from_sensor {
+        pose.translation *= factor;
+    }
+}
+
+/// Warns when the cloud's extent is not what a depth camera sees, and says how to fix it.
+fn warn_if_implausible(args: &MeshArgs, cloud: &tacmesh::PointCloud) {
+    let Some(extent_m) = tacmesh::pipeline::robust_extent_m(&cloud.points) else {
+        return;
+    };
+    let scaled = match args.scale {
+        Some(factor) => format!(" (after --scale {factor})"),
+        None => String::new(),
+    };
+    let (min, max) = PLAUSIBLE_EXTENT_M.into_inner();
+    if extent_m > max {
+        tracing::warn!(
+            "{}: the cloud is {extent_m:.0} m across{scaled}, more than a depth camera sees \
+             (up to about {max:.0} m): if its unit is millimetres, mesh it with --scale 0.001 \
+             (centimetres: --scale 0.01)",
+            args.cloud.display()
+        );
+    } else if extent_m < min {
+        tracing::warn!(
+            "{}: the cloud is {:.2} mm across{scaled}, less than a depth camera resolves \
+             (about {:.0} mm): if its unit is not metres, give --scale with the factor to \
+             metres (1000 for kilometres)",
+            args.cloud.display(),
+            extent_m * 1e3,
+            min * 1e3
+        );
+    }
+}
+
+pub fn run(args: MeshArgs) -> anyhow::Result<()> {
+    // With --objects in file order with the invalid points, so that labels.txt lines up with
+    // the file; they are labelled 0 and meshed with no object.
+    let non_finite = if args.objects {
+        NonFinite::Keep
+    } else {
+        NonFinite::Drop
+    };
+    let mut file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
+    if file.non_finite > 0 {
+        tracing::info!(
+            "{}: left out {} points with a NaN or infinite coordinate",
+            args.cloud.display(),
+            file.non_finite
+        );
+    }
+    if let Some(factor) = args.scale {
+        scale(&mut file, factor);
+    }
+    warn_if_implausible(&args, &file.cloud);
+    let viewpoint = viewpoint(&args, &file);
+    if args.objects {
+        return mesh_objects(&args, &file, viewpoint);
+    }
+    let cloud = file.cloud;
     let mut config = MeshConfig {
-        viewpoint: args.viewpoint,
+        viewpoint,
         ..MeshConfig::default()
     };
     if let Some(v) = args.voxel_m {
@@ -73,10 +152,13 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     }
     let (mesh, report) =
         mesh_cloud(&cloud, &config).with_context(|| format!("meshing {}", args.cloud.display()))?;
-    tacmesh::formats::write_mesh(&args.output, &mesh)
-        .with_context(|| format!("writing mesh {}", args.output.display()))?;
+    tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
     if args.json {
-        super::print_json(&report)?;
+        super::print_json(&MeshOutput {
+            non_finite_points: file.non_finite,
+            viewpoint: viewpoint.map(|v| v.to_array()),
+            report,
+        })?;
     } else {
         tracing::info!(
             points = report.points,
@@ -91,6 +173,34 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Where normals face: `--viewpoint`, else the sensor position the file records (a PCD's
+/// `VIEWPOINT`: PCL writes one for every scan), else none (orientation by propagation).
+fn viewpoint(args: &MeshArgs, file: &CloudFile) -> Option<Vec3> {
+    if args.viewpoint.is_some() {
+        return args.viewpoint;
+    }
+    let v = Vec3::from(file.cloud_from_sensor?.translation);
+    tracing::info!(
+        "{}: normals face the viewpoint the file records, {},{},{} (--viewpoint overrides it)",
+        args.cloud.display(),
+        v.x,
+        v.y,
+        v.z
+    );
+    Some(v)
+}
+
+/// What `--json` prints: the pipeline's report and what reading the file found.
+#[derive(serde::Serialize)]
+struct MeshOutput {
+    /// Points of the file with a NaN or infinite coordinate, left out of the mesh.
+    non_finite_points: usize,
+    /// Where the normals were made to face, `null` when they were oriented by propagation.
+    viewpoint: Option<[f32; 3]>,
+    #[serde(flatten)]
+    report: tacmesh::pipeline::MeshReport,
+}
+
 /// One line of `--objects --json`.
 #[derive(serde::Serialize)]
 struct ObjectReport {
@@ -101,12 +211,13 @@ struct ObjectReport {
 }
 
 /// `--objects`: segment the scene, mesh each object, write the meshes and `labels.txt`.
-fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<()> {
+fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> anyhow::Result<()> {
+    let cloud = &file.cloud;
     let dir = &args.output;
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     // Scans are in the sensor frame unless a viewpoint says otherwise.
-    let viewpoint = args.viewpoint.unwrap_or(Vec3::ZERO);
+    let viewpoint = viewpoint.unwrap_or(Vec3::ZERO);
     // The daemon's segmentation with its exact per-point settings: one scan has time for them,
     // and the live settings' 8 mm cells split PCL's mug from its handle.
     let segmentation = segment(
@@ -140,8 +251,7 @@ fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<
         let file = dir.join(format!("object-{id}.ply"));
         match mesh_cloud(&object, &config) {
             Ok((mesh, report)) => {
-                tacmesh::formats::write_mesh(&file, &mesh)
-                    .with_context(|| format!("writing mesh {}", file.display()))?;
+                tacmesh::formats::write_mesh(&file, &mesh).context("writing the mesh")?;
                 tracing::info!(
                     points = report.points,
                     faces = report.faces,
@@ -169,6 +279,7 @@ fn mesh_objects(args: &MeshArgs, cloud: &tacmesh::PointCloud) -> anyhow::Result<
         .with_context(|| format!("writing {}", labels_path.display()))?;
     if args.json {
         super::print_json(&serde_json::json!({
+            "non_finite_points": file.non_finite,
             "planes": segmentation.planes.len(),
             "objects": reports,
         }))?;

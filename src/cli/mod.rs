@@ -162,7 +162,7 @@ pub(crate) fn shape_or_mesh_file(name: &str) -> anyhow::Result<TriMesh> {
             shapes.join(", ")
         );
     }
-    tacmesh::formats::read_mesh(path).with_context(|| format!("reading mesh {name}"))
+    tacmesh::formats::read_mesh(path).context("reading the mesh")
 }
 
 /// Prints `value` as one JSON object on standard output.

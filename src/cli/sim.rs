@@ -60,15 +60,13 @@ pub fn run(cmd: SimCommand) -> anyhow::Result<()> {
                 },
             )
             .with_context(|| format!("sampling {}", args.shape))?;
-            tacmesh::formats::write_cloud(&args.output, &cloud)
-                .with_context(|| format!("writing {}", args.output.display()))?;
+            tacmesh::formats::write_cloud(&args.output, &cloud).context("writing the output")?;
             tracing::info!(points = cloud.len(), "wrote {}", args.output.display());
             Ok(())
         }
         SimCommand::Shape(args) => {
             let mesh = super::shape_or_mesh_file(&args.shape)?;
-            tacmesh::formats::write_mesh(&args.output, &mesh)
-                .with_context(|| format!("writing {}", args.output.display()))?;
+            tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the output")?;
             Ok(())
         }
     }

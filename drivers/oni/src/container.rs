@@ -152,9 +152,9 @@ pub(crate) struct RecordReader<R> {
 impl<R: Read + Seek> RecordReader<R> {
     /// Reads and checks the file header; the reader is then positioned at the first record.
     pub fn new(mut reader: R, file: String) -> Result<(Self, FileHeader), OniError> {
-        let io = |source| OniError::Io {
+        let io = |error| OniError::Io {
             file: file.clone(),
-            source,
+            error,
         };
         let file_len = reader.seek(SeekFrom::End(0)).map_err(io)?;
         reader.seek(SeekFrom::Start(0)).map_err(io)?;
@@ -274,9 +274,9 @@ impl<R: Read + Seek> RecordReader<R> {
             });
         }
         let mut bytes = vec![0; len];
-        let io = |source| OniError::Io {
+        let io = |error| OniError::Io {
             file: self.file.clone(),
-            source,
+            error,
         };
         self.reader.seek(SeekFrom::Start(offset)).map_err(io)?;
         self.reader.read_exact(&mut bytes).map_err(io)?;

@@ -4,12 +4,8 @@ use crate::codec::CodecError;
 /// reader) and, where there is one, the byte offset of the record at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum OniError {
-    #[error("cannot read ONI recording {file}: {source}")]
-    Io {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("cannot read ONI recording {file}: {error}")]
+    Io { file: String, error: std::io::Error },
     #[error("{file} is not an ONI recording: it starts with {found:02x?}, not \"NI10\"")]
     BadMagic { file: String, found: Vec<u8> },
     #[error(
@@ -47,13 +43,12 @@ pub enum OniError {
         node: String,
         what: &'static str,
     },
-    #[error("{file}: depth frame {frame_number} (record at offset {offset}): {source}")]
+    #[error("{file}: depth frame {frame_number} (record at offset {offset}): {error}")]
     Frame {
         file: String,
         offset: u64,
         frame_number: u32,
-        #[source]
-        source: CodecError,
+        error: CodecError,
     },
     #[error("{file} has no depth frame at index {index}: it holds {count}")]
     NoSuchFrame {

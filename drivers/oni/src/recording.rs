@@ -118,9 +118,9 @@ impl OniRecording<BufReader<File>> {
     /// Opens and indexes the recording at `path`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, OniError> {
         let path = path.as_ref();
-        let file = File::open(path).map_err(|source| OniError::Io {
+        let file = File::open(path).map_err(|error| OniError::Io {
             file: path.display().to_string(),
-            source,
+            error,
         })?;
         Self::from_reader(BufReader::new(file), path.display().to_string())
     }
@@ -168,11 +168,11 @@ impl<R: Read + Seek> OniRecording<R> {
             frame.payload_len as usize,
             "a depth frame",
         )?;
-        decode_16zt(&payload, self.depth.pixel_count()).map_err(|source| OniError::Frame {
+        decode_16zt(&payload, self.depth.pixel_count()).map_err(|error| OniError::Frame {
             file: self.file().to_owned(),
             offset: frame.record_offset,
             frame_number: frame.frame_number,
-            source,
+            error,
         })
     }
 }

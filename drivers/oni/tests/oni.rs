@@ -271,7 +271,7 @@ fn frame_running_past_its_payload_is_a_frame_error() {
             OniError::Frame {
                 offset: FRAME1_RECORD,
                 frame_number: 1,
-                source: CodecError::Truncated { .. },
+                error: CodecError::Truncated { .. },
                 ..
             }
         ),
@@ -290,7 +290,7 @@ fn frame_with_wrong_pixel_count_is_a_frame_error() {
         bytes[at + 4..at + 8].copy_from_slice(&height.to_le_bytes());
         let mut recording = open_bytes(bytes).unwrap();
         match recording.read_depth_mm(0).unwrap_err() {
-            OniError::Frame { source, .. } => match source {
+            OniError::Frame { error, .. } => match error {
                 CodecError::TooManyPixels { expected, .. } => {
                     assert!(too_many);
                     assert_eq!(expected, 640 * 479);

@@ -23,11 +23,10 @@ use crate::Time;
 /// offset in the file of the record at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum BagError {
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path} is not a ROS bag v2.0 (no `#ROSBAG V2.0` line at its start)")]
     NotABag { path: PathBuf },
@@ -37,12 +36,11 @@ pub enum BagError {
         offset: u64,
         reason: String,
     },
-    #[error("{path}: chunk at byte {offset}: {source}")]
+    #[error("{path}: chunk at byte {offset}: {error}")]
     Chunk {
         path: PathBuf,
         offset: u64,
-        #[source]
-        source: ChunkError,
+        error: ChunkError,
     },
     #[error(
         "{path}: message at byte {offset} refers to connection {conn}, which the bag never defines"
@@ -95,9 +93,9 @@ impl Bag {
     /// connections are then learned from the chunks as [`Bag::messages`] walks them.
     pub fn open(path: impl AsRef<Path>) -> Result<Bag, BagError> {
         let path = path.as_ref().to_path_buf();
-        let io = |source| BagError::Io {
+        let io = |error| BagError::Io {
             path: path.clone(),
-            source,
+            error,
         };
         let file = File::open(&path).map_err(io)?;
         let file_len = file.metadata().map_err(io)?.len();
@@ -172,14 +170,14 @@ impl Bag {
     /// Iterates over every message in file order (chunk by chunk; within a chunk, as written).
     /// Opens its own handle on the file, so several iterations can run side by side.
     pub fn messages(&self) -> Result<Messages, BagError> {
-        let mut file = File::open(&self.path).map_err(|source| BagError::Io {
+        let mut file = File::open(&self.path).map_err(|error| BagError::Io {
             path: self.path.clone(),
-            source,
+            error,
         })?;
         file.seek(SeekFrom::Start(self.chunks_start))
-            .map_err(|source| BagError::Io {
+            .map_err(|error| BagError::Io {
                 path: self.path.clone(),
-                source,
+                error,
             })?;
         Ok(Messages {
             bag: self.clone(),
@@ -199,9 +197,9 @@ impl Bag {
     ) -> Result<(), BagError> {
         reader
             .seek(SeekFrom::Start(index_pos))
-            .map_err(|source| BagError::Io {
+            .map_err(|error| BagError::Io {
                 path: self.path.clone(),
-                source,
+                error,
             })?;
         let (mut pos, mut chunk_infos) = (index_pos, 0u32);
         while let Some(rec) = self.read_record(reader, pos, self.file_len)? {
@@ -240,9 +238,9 @@ impl Bag {
 
     fn record_error(&self, e: RecordError, base: u64) -> BagError {
         match e {
-            RecordError::Io { source, .. } => BagError::Io {
+            RecordError::Io { error, .. } => BagError::Io {
                 path: self.path.clone(),
-                source,
+                error,
             },
             other => self.corrupt(base + other.offset(), other.to_string()),
         }
@@ -324,10 +322,10 @@ impl Messages {
         let compression = rec.header.string("compression").map_err(bad)?;
         let size = rec.header.u32("size").map_err(bad)?;
         let data =
-            chunk::decompress(&compression, size, &rec.data).map_err(|source| BagError::Chunk {
+            chunk::decompress(&compression, size, &rec.data).map_err(|error| BagError::Chunk {
                 path: self.bag.path.clone(),
                 offset,
-                source,
+                error,
             })?;
         let (mut inner, len) = (data.as_slice(), data.len() as u64);
         let mut inner_pos = 0u64;

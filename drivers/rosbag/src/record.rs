@@ -69,12 +69,8 @@ pub enum RecordError {
     },
     #[error("malformed record header at byte {offset}: {reason}")]
     BadHeader { offset: u64, reason: String },
-    #[error("read failed at byte {offset}: {source}")]
-    Io {
-        offset: u64,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("read failed at byte {offset}: {error}")]
+    Io { offset: u64, error: std::io::Error },
 }
 
 impl RecordError {
@@ -281,7 +277,7 @@ impl<R: Read> Budget<'_, R> {
         let mut buf = vec![0u8; len as usize];
         self.reader
             .read_exact(&mut buf)
-            .map_err(|source| match source.kind() {
+            .map_err(|error| match error.kind() {
                 std::io::ErrorKind::UnexpectedEof => RecordError::Truncated {
                     offset: self.pos,
                     what,
@@ -290,7 +286,7 @@ impl<R: Read> Budget<'_, R> {
                 },
                 _ => RecordError::Io {
                     offset: self.pos,
-                    source,
+                    error,
                 },
             })?;
         self.pos += len;

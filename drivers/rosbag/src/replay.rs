@@ -49,12 +49,11 @@ pub enum ReplayError {
     NoDepthTopic { path: PathBuf, topics: String },
     #[error("{path} has no camera_info on {topic}, so the depth intrinsics are unknown")]
     NoCameraInfo { path: PathBuf, topic: String },
-    #[error("{path}: cannot decode the {topic} message: {source}")]
+    #[error("{path}: cannot decode the {topic} message: {error}")]
     Message {
         path: PathBuf,
         topic: String,
-        #[source]
-        source: MessageError,
+        error: MessageError,
     },
 }
 
@@ -107,19 +106,19 @@ impl BagReplay {
             if info.is_none() && topic == info_topic(depth) {
                 info =
                     Some(
-                        CameraInfo::decode(&msg.data).map_err(|source| ReplayError::Message {
+                        CameraInfo::decode(&msg.data).map_err(|error| ReplayError::Message {
                             path: bag.path().to_path_buf(),
                             topic: topic.to_owned(),
-                            source,
+                            error,
                         })?,
                     );
             }
             if units.is_none() && topic == units_topic(depth) {
                 units = Some(
-                    decode_float32(&msg.data).map_err(|source| ReplayError::Message {
+                    decode_float32(&msg.data).map_err(|error| ReplayError::Message {
                         path: bag.path().to_path_buf(),
                         topic: topic.to_owned(),
-                        source,
+                        error,
                     })?,
                 );
             }

@@ -63,7 +63,7 @@ fn bz2_chunk_is_unsupported_compression_error() {
     match &err {
         BagError::Chunk {
             offset,
-            source: ChunkError::UnsupportedCompression(c),
+            error: ChunkError::UnsupportedCompression(c),
             ..
         } => {
             assert_eq!(c, "bz2");

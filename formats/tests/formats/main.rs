@@ -4,6 +4,7 @@
 mod util;
 
 mod mangle;
+mod non_finite;
 mod real_data;
 mod rejection;
 mod round_trip;
