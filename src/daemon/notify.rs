@@ -19,9 +19,9 @@
 //! - The perception thread is watched by its [`Progress`] through the ring: it is stalled when
 //!   frames have waited in the ring, with none taken, for the whole time. An idle pipeline (no
 //!   frames because the sensor is gone) is not stalled.
-//! - Each mesher thread beats its own heartbeat when it takes a job, when it finishes one and
-//!   every second while it waits for one, so one worker stuck inside a meshing run (or dead by
-//!   a panic) trips the watchdog even while the others keep meshing. Its limit is
+//! - Each mesher thread beats its own heartbeat when it takes a job and sets it idle while it
+//!   waits for one, so one worker stuck inside a meshing run (or dead by a panic in one) trips
+//!   the watchdog even while the others keep meshing. Its limit is
 //!   [`MESH_RUN_LIMIT`], not [`STALL_AFTER`]: one run of a large object is legitimately long.
 //!   The mesh queue is also watched as a whole: stalled when jobs have waited and no meshing
 //!   run has finished.
@@ -248,6 +248,8 @@ struct Slot {
 }
 
 const RETIRED: u64 = u64::MAX;
+/// A worker waiting for work: not watched until its next beat.
+const IDLE: u64 = u64::MAX - 1;
 
 /// One thread's heartbeat. Registering counts as a beat, so a thread that has not started yet
 /// has a moment before it is missed.
@@ -264,6 +266,12 @@ impl Heartbeat {
             .last_beat_ms
             .store(millis_since(self.epoch, Instant::now()), Ordering::Relaxed);
         self.slot.beaten.store(true, Ordering::Relaxed);
+    }
+
+    /// The thread waits for work and is not watched until it beats again (a mesher between
+    /// jobs: an empty queue is not a stall).
+    pub fn idle(&self) {
+        self.slot.last_beat_ms.store(IDLE, Ordering::Relaxed);
     }
 
     /// The thread has ended normally and is no longer watched. A thread that dies by a panic
@@ -316,7 +324,7 @@ impl Heartbeats {
             let limit_ms = slot.limit.unwrap_or(limit).as_millis() as u64;
             let last = slot.last_beat_ms.load(Ordering::Relaxed);
             let silent_ms = now_ms.saturating_sub(last);
-            (last != RETIRED && silent_ms > limit_ms).then(|| {
+            (last != RETIRED && last != IDLE && silent_ms > limit_ms).then(|| {
                 format!(
                     "the {} thread has not moved for {:.1} s",
                     slot.name,
@@ -761,9 +769,9 @@ mod tests {
         );
     }
 
-    /// Several meshers: one stuck inside a run while the other keeps meshing (the queue as a
+    /// Several meshers: one stuck inside a run while another keeps meshing (the queue as a
     /// whole moves) still stops the pings, once the stuck one passes its own limit; the
-    /// source's shorter limit does not apply to it.
+    /// source's shorter limit does not apply to it, and an idle one never stalls.
     #[test]
     fn one_stuck_mesher_among_several_stops_the_watchdog_pings() {
         let (_dir, socket, notifier) = manager(Some("2000000"));
@@ -771,6 +779,9 @@ mod tests {
         let source = heartbeats.register("source");
         let busy = heartbeats.register_worker("mesher 0", MESH_RUN_LIMIT);
         let stuck = heartbeats.register_worker("mesher 1", MESH_RUN_LIMIT);
+        // A third waits for work all along: idle is never a stall.
+        let waiting = heartbeats.register_worker("mesher 2", MESH_RUN_LIMIT);
+        waiting.idle();
         assert!(!heartbeats.any_beaten());
         busy.beat();
         stuck.beat();
