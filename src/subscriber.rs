@@ -31,6 +31,8 @@ pub enum SubscribeError {
     Wire { path: PathBuf, cause: WireError },
     #[error("the daemon on {} closed the connection", path.display())]
     Closed { path: PathBuf },
+    #[error("the daemon on {} refused this subscriber: {reason}", path.display())]
+    Refused { path: PathBuf, reason: String },
 }
 
 /// One connection to the daemon.
@@ -66,6 +68,12 @@ impl Subscription {
             server: String::new(),
         };
         let first = subscription.next_message()?;
+        if let Message::Goodbye { reason } = first {
+            return Err(SubscribeError::Refused {
+                path: path.to_owned(),
+                reason,
+            });
+        }
         check_hello(&first).map_err(|cause| SubscribeError::Wire {
             path: path.to_owned(),
             cause,

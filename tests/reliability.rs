@@ -823,8 +823,8 @@ fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
     assert!(p99 < 5000.0, "p99 data age {p99} ms");
 }
 
-/// `socket.allow_users`: a process whose user is not listed is cut off before Hello, and the
-/// refusal is logged; a listed user subscribes as usual.
+/// `socket.allow_users`: a process whose user is not listed gets a Goodbye saying why instead
+/// of the Hello, and the refusal is logged; a listed user subscribes as usual.
 #[test]
 fn only_the_allowed_users_may_subscribe() {
     use std::os::unix::fs::MetadataExt;
@@ -860,6 +860,16 @@ fn only_the_allowed_users_may_subscribe() {
                 run.wait_for_log("refused a subscriber", 1, Duration::from_secs(10)),
                 "{}",
                 run.log()
+            );
+            // The refused user is told why, not "connection reset by peer".
+            let out = crate::util::tacmesh(&["subscribe", "--socket", path_str(&socket)]);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success());
+            assert!(
+                stderr.contains(&format!(
+                    "refused this subscriber: not allowed to subscribe: uid {uid} "
+                )),
+                "{stderr}"
             );
         }
     }

@@ -212,11 +212,12 @@ else
 fi
 
 # --- refuse-not-allowed: the daemon's own check (socket.allow_groups = ["tacmesh"]) --------
-# root passes any file mode, so only the daemon's peer-credential check can refuse it: the
-# connection is closed before Hello, and the refusal is logged.
+# root passes any file mode, so only the daemon's peer-credential check can refuse it: it gets
+# a Goodbye saying why instead of the Hello, and the refusal is logged.
 subscribe root 1
 refusal_logged() { daemon_log | grep -q 'refused a subscriber: uid 0 gid 0'; }
-if [ "$sub_rc" != 0 ] && [ "$sub_meshes" = 0 ] && wait_until 5 refusal_logged; then
+if [ "$sub_rc" != 0 ] && [ "$sub_meshes" = 0 ] && grep -q 'refused this subscriber' <<<"$sub_out" &&
+  wait_until 5 refusal_logged; then
   pass refuse-not-allowed "root: exit $sub_rc, 0 meshes: $(first_line "$sub_out"); the daemon:" \
     "$(daemon_log | grep -m 1 'refused a subscriber')"
 else

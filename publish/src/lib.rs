@@ -512,10 +512,31 @@ fn accept_loop(shared: &Arc<Shared>, listener: std::os::unix::net::UnixListener)
     }
 }
 
+/// Tells a refused peer why, in a Goodbye instead of the Hello (docs/protocol.md), and closes
+/// the connection. Best effort and bounded: the frame is small enough for the socket's buffer,
+/// and a peer that cannot take it at once loses only the explanation. What the peer sent is
+/// read first, since closing a Unix socket with unread data resets the connection and the
+/// peer would then see "connection reset" instead of the reason.
+fn refuse(mut stream: UnixStream, why: &str) {
+    use std::io::{Read, Write};
+    let mut goodbye = Vec::new();
+    let reason: String = why.chars().take(MAX_REASON_BYTES / 4).collect();
+    if encode(&Message::Goodbye { reason }, &mut goodbye).is_err()
+        || stream.set_nonblocking(true).is_err()
+    {
+        return;
+    }
+    let mut sent_by_peer = [0u8; 256];
+    while matches!(stream.read(&mut sent_by_peer), Ok(n) if n > 0) {}
+    let _ = stream.write_all(&goodbye);
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+}
+
 impl Shared {
     /// Registers a new subscriber with the current snapshot and starts its threads.
     fn admit(self: &Arc<Self>, stream: UnixStream) {
-        if !self.peer_allowed(&stream) {
+        if let Some(why) = self.peer_refusal(&stream) {
+            refuse(stream, &why);
             return;
         }
         if let Err(error) = stream.set_write_timeout(Some(self.write_timeout)) {
@@ -543,12 +564,12 @@ impl Shared {
         }
     }
 
-    /// Whether [`PublisherConfig::allowed_peers`] admits the process at the other end. A
-    /// refused connection is closed without a word and counted; the first refusal and every
-    /// power of two after it are logged, so a client retrying in a loop cannot flood the log.
-    fn peer_allowed(&self, stream: &UnixStream) -> bool {
+    /// Why [`PublisherConfig::allowed_peers`] does not admit the process at the other end, or
+    /// `None` when it does. A refusal is counted; the first and every power of two after it
+    /// are logged, so a client retrying in a loop cannot flood the log.
+    fn peer_refusal(&self, stream: &UnixStream) -> Option<String> {
         let Some(allowed) = &self.allowed_peers else {
-            return true;
+            return None;
         };
         let (verdict, who) = match rustix::net::sockopt::socket_peercred(stream) {
             Ok(cred) => {
@@ -563,16 +584,20 @@ impl Shared {
                 format!("a peer whose credentials cannot be read ({error})"),
             ),
         };
-        if !verdict {
-            let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
-            if refused.is_power_of_two() {
-                tracing::warn!(
-                    "refused a subscriber: {who} is not in socket.allow_users / \
-                     socket.allow_groups ({refused} refused so far)"
-                );
-            }
+        if verdict {
+            return None;
         }
-        verdict
+        let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
+        if refused.is_power_of_two() {
+            tracing::warn!(
+                "refused a subscriber: {who} is not in socket.allow_users / \
+                 socket.allow_groups ({refused} refused so far)"
+            );
+        }
+        Some(format!(
+            "not allowed to subscribe: {who} is not in the daemon's socket.allow_users or \
+             socket.allow_groups"
+        ))
     }
 
     /// Disconnects a subscriber: unregisters it, closes its socket, stops its threads. Only the

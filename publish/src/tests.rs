@@ -431,7 +431,14 @@ fn only_allowed_peers_may_subscribe() {
             assert_eq!(client.snapshot(), vec![(1, 1)], "{name}");
             assert_eq!(publisher.counters().clients_refused, 0, "{name}");
         } else {
-            // Closed without a word: not even Hello.
+            // No Hello: a Goodbye saying why, then the end.
+            match client.next() {
+                Some(Message::Goodbye { reason }) => {
+                    assert!(reason.contains("not allowed to subscribe"), "{reason}");
+                    assert!(reason.contains(&format!("uid {uid} ")), "{reason}");
+                }
+                other => panic!("{name}: expected a Goodbye, got {other:?}"),
+            }
             assert_eq!(client.next(), None, "{name}");
             wait_until("the refusal is counted", || {
                 publisher.counters().clients_refused == 1
@@ -439,6 +446,7 @@ fn only_allowed_peers_may_subscribe() {
             assert_eq!(publisher.counters().clients_connected, 0);
             // Retrying is refused every time, and counted.
             let mut again = TestClient::connect(&path);
+            assert!(matches!(again.next(), Some(Message::Goodbye { .. })));
             assert_eq!(again.next(), None);
             wait_until("both refusals", || {
                 publisher.counters().clients_refused == 2
