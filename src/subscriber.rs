@@ -56,9 +56,12 @@ impl Subscription {
         let mut stream = UnixStream::connect(path).map_err(connect_err)?;
         stream.set_read_timeout(read_timeout).map_err(connect_err)?;
         let mut hello = Vec::new();
-        // Subscribe is empty and always encodes.
+        // Subscribe is empty and always encodes. It is optional, and a failed write is not
+        // the error to report: a daemon that refuses this peer may already have sent its
+        // Goodbye and closed (the write then fails with a broken pipe), and the read below
+        // gets that Goodbye, or says what else went wrong.
         if encode(&Message::Subscribe, &mut hello).is_ok() {
-            std::io::Write::write_all(&mut stream, &hello).map_err(connect_err)?;
+            let _ = std::io::Write::write_all(&mut stream, &hello);
         }
         let mut subscription = Subscription {
             stream,
