@@ -248,13 +248,15 @@ impl DepthAiOptions {
         Ok(options)
     }
 
-    /// A short name for logs: `depthai:first device`, `depthai:<id>` or `depthai:<file>`.
+    /// A short name for logs: `depthai: (the first device found)`, `depthai:<id>` or
+    /// `depthai:<file>`. The spec as typed comes first, so that it never reads as a device
+    /// named "first device".
     pub fn name(&self) -> String {
         match &self.mode {
-            Mode::Live(live) => format!(
-                "depthai:{}",
-                live.device.as_deref().unwrap_or("first device")
-            ),
+            Mode::Live(live) => match &live.device {
+                Some(device) => format!("depthai:{device}"),
+                None => "depthai: (the first device found)".to_owned(),
+            },
             Mode::Replay(replay) => format!("depthai:{}", replay.path.display()),
         }
     }
@@ -268,7 +270,7 @@ mod tests {
     fn empty_spec_is_the_first_camera_with_defaults() {
         let options = DepthAiOptions::parse_spec("").unwrap();
         assert_eq!(options, DepthAiOptions::default());
-        assert_eq!(options.name(), "depthai:first device");
+        assert_eq!(options.name(), "depthai: (the first device found)");
     }
 
     #[test]

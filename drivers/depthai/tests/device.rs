@@ -116,7 +116,7 @@ fn a_missing_camera_fails_clearly_within_the_search_timeout() {
     assert!(took < Duration::from_secs(60), "the search took {took:?}");
     // The daemon's supervisor sees a missing device, which it retries with backoff.
     assert!(matches!(
-        err.into_source_error("depthai:first device"),
+        err.into_source_error("depthai: (the first device found)"),
         SourceError::DeviceMissing { .. }
     ));
 }

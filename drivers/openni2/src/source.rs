@@ -33,7 +33,11 @@ impl OpenNi2Source {
     /// Every failure is [`SourceError::DeviceMissing`] naming the URI, with OpenNI2's extended
     /// error text. Recordings play once (no looping).
     pub fn open(uri: Option<&str>, options: OpenNi2Options) -> Result<Self, SourceError> {
-        let name = format!("openni2:{}", uri.unwrap_or("first device"));
+        // The spec as typed first, so that it never reads as a device named "first device".
+        let name = uri.map_or_else(
+            || "openni2: (the first device found)".to_owned(),
+            |uri| format!("openni2:{uri}"),
+        );
         let recording = uri.is_some_and(is_recording);
         if let Some(path) = uri.filter(|u| is_recording(u) && !Path::new(u).is_file()) {
             return Err(SourceError::DeviceMissing {
