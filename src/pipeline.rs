@@ -143,42 +143,31 @@ const MIN_POINTS_FOR_SPACING: usize = 64;
 
 /// The median distance from a point to its nearest neighbour, metres, over up to 2,000 points
 /// spread through the cloud: how finely the data samples its surface. Neighbours are looked for
-/// in a hash grid of cells `extent_m / 50` wide (the default voxel), four times wider while
-/// most points find none there. `None` with fewer than two finite points.
+/// in the segmentation's voxel hash grid with cells `extent_m / 50` wide (the default voxel),
+/// four times wider while most points find none there. `None` with fewer than two finite
+/// points.
 pub fn median_point_spacing_m(points: &[Vec3], extent_m: f32) -> Option<f32> {
-    let finite: Vec<Vec3> = points.iter().copied().filter(|p| p.is_finite()).collect();
+    let finite: Vec<u32> = (0..points.len() as u32)
+        .filter(|&i| points[i as usize].is_finite())
+        .collect();
     if finite.len() < 2 || !(extent_m.is_finite() && extent_m > 0.0) {
         return None;
     }
     let stride = finite.len().div_ceil(2000);
     let mut cell_m = extent_m / 50.0;
     while cell_m <= 2.0 * extent_m {
-        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
-        let mut cells: std::collections::HashMap<glam::IVec3, Vec<u32>> = Default::default();
-        for (i, &p) in finite.iter().enumerate() {
-            cells.entry(cell_of(p)).or_default().push(i as u32);
-        }
+        let grid = tacmesh_segment::grid::VoxelGrid::new(points, &finite, cell_m);
         let mut nearest: Vec<f32> = Vec::new();
         let mut sampled = 0;
-        for (i, &p) in finite.iter().enumerate().step_by(stride) {
+        for &i in finite.iter().step_by(stride) {
             sampled += 1;
-            let centre = cell_of(p);
+            let p = points[i as usize];
             let mut best = f32::INFINITY;
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        let Some(others) = cells.get(&(centre + glam::IVec3::new(dx, dy, dz)))
-                        else {
-                            continue;
-                        };
-                        for &j in others {
-                            if j as usize != i {
-                                best = best.min(p.distance(finite[j as usize]));
-                            }
-                        }
-                    }
+            grid.for_each_near(p, |j| {
+                if j != i {
+                    best = best.min(p.distance(points[j as usize]));
                 }
-            }
+            });
             // Farther than one cell, a neighbour in the 27 cells may not be the nearest.
             if best <= cell_m {
                 nearest.push(best);

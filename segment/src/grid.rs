@@ -8,7 +8,7 @@ use rustc_hash::FxHashMap;
 
 type Cell = [i32; 3];
 
-pub(crate) struct VoxelGrid {
+pub struct VoxelGrid {
     inv_cell_m: f32,
     cell_ids: FxHashMap<Cell, u32>,
     /// `start[c]..start[c + 1]` indexes `members` for cell `c`.
@@ -26,7 +26,7 @@ fn cell_of(p: Vec3, inv_cell_m: f32) -> Cell {
 
 impl VoxelGrid {
     /// Bins `indices` (of finite points, ascending) into cells of side `cell_m` (> 0).
-    pub(crate) fn new(points: &[Vec3], indices: &[u32], cell_m: f32) -> Self {
+    pub fn new(points: &[Vec3], indices: &[u32], cell_m: f32) -> Self {
         let inv_cell_m = 1.0 / cell_m;
         let mut cell_ids: FxHashMap<Cell, u32> = FxHashMap::default();
         let point_cell: Vec<u32> = indices
@@ -62,7 +62,7 @@ impl VoxelGrid {
 
     /// Calls `visit` with every binned point in the 27 cells around `p`'s cell (a superset of
     /// the binned points within one cell side of `p`).
-    pub(crate) fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(u32)) {
+    pub fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(u32)) {
         let c = cell_of(p, self.inv_cell_m);
         for dx in -1..=1 {
             for dy in -1..=1 {

@@ -11,6 +11,8 @@
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream.
 //! - [`segment_cloud`]: the same for a [`PointCloud`].
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
+//! - [`grid::VoxelGrid`]: the voxel hash grid the stages search neighbours in, for other
+//!   neighbour queries over a cloud (the offline pipeline's point-spacing estimate).
 //!
 //! Pipeline, one file per stage, in order:
 //! 1. `planes.rs`: hinted planes refined, or RANSAC for the largest plane and least-squares
@@ -29,7 +31,7 @@
 
 mod clusters;
 mod creases;
-mod grid;
+pub mod grid;
 mod planes;
 mod voxels;
 
