@@ -512,12 +512,10 @@ fn set_ascii_list<'t, E: PropertyAccess>(
 /// Reads the header, checks it against the bytes after it, then parses every element in
 /// order: `vertex` into records, `face` too when `faces_wanted`, the rest only to skip them.
 fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, FormatError> {
-    let ply_error =
-        |e: ply_rs_bw::parser::ParseError| FormatError::malformed(name, one_line(&e.to_string()));
     let mut reader = Reader::new(Cursor::new(bytes));
     let header = Parser::<Ignored>::new()
         .read_header(&mut reader)
-        .map_err(ply_error)?;
+        .map_err(|e| ply_error(name, &e))?;
     let body = bytes
         .get(reader.get_ref().position() as usize..)
         .unwrap_or_default();
@@ -527,64 +525,81 @@ fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, Format
         check_face_element(&header, name)?;
     }
 
+    let mut payload = if header.encoding == Encoding::Ascii {
+        let header_lines = bytes[..bytes.len() - body.len()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        Payload::Ascii(AsciiLines::new(body, header_lines + 1))
+    } else {
+        Payload::Binary(reader)
+    };
     let mut vertices = Vec::new();
     let mut faces = faces_wanted.then(Vec::new);
-    if header.encoding == Encoding::Ascii {
-        let body_start = bytes.len() - body.len();
-        let header_lines = bytes[..body_start].iter().filter(|&&b| b == b'\n').count();
-        let mut lines = AsciiLines::new(body, header_lines + 1);
-        for (element_name, def) in &header.elements {
-            match (element_name.as_str(), &mut faces) {
-                ("vertex", _) => {
-                    vertices = read_ascii_element(&mut lines, element_name, def, name)?;
-                }
-                ("face", Some(faces)) => {
-                    *faces = read_ascii_element(&mut lines, element_name, def, name)?;
-                }
-                _ => {
-                    read_ascii_element::<Ignored>(&mut lines, element_name, def, name)?;
-                }
-            }
-        }
-        if let Some((line_number, _)) = lines.next_line(name)? {
-            tracing::debug!(
-                "{name}: ignored the lines from {line_number} on, after the last element"
-            );
-        }
-        return Ok(Contents {
-            vertices,
-            has_normals,
-            faces,
-        });
-    }
     for (element_name, def) in &header.elements {
         match (element_name.as_str(), &mut faces) {
-            ("vertex", _) => {
-                vertices = Parser::<VertexRecord>::new()
-                    .read_payload_for_element(&mut reader, def, &header)
-                    .map_err(ply_error)?;
-            }
-            ("face", Some(faces)) => {
-                *faces = Parser::<FaceRecord>::new()
-                    .read_payload_for_element(&mut reader, def, &header)
-                    .map_err(ply_error)?;
-            }
+            ("vertex", _) => vertices = payload.element(element_name, def, &header, name)?,
+            ("face", Some(faces)) => *faces = payload.element(element_name, def, &header, name)?,
             _ => {
-                Parser::<Ignored>::new()
-                    .read_payload_for_element(&mut reader, def, &header)
-                    .map_err(ply_error)?;
+                payload.element::<Ignored>(element_name, def, &header, name)?;
             }
         }
     }
-    let unread = bytes.len() as u64 - reader.get_ref().position();
-    if unread > 0 {
-        tracing::debug!("{name}: ignored {unread} bytes after the last element");
-    }
+    payload.note_leftover(bytes.len(), name)?;
     Ok(Contents {
         vertices,
         has_normals,
         faces,
     })
+}
+
+/// Where the elements come from: ascii lines, read here; binary records, read by `ply-rs-bw`.
+enum Payload<'a> {
+    Ascii(AsciiLines<'a>),
+    Binary(Reader<Cursor<&'a [u8]>>),
+}
+
+impl Payload<'_> {
+    /// The next element's records.
+    fn element<E: PropertyAccess>(
+        &mut self,
+        element_name: &str,
+        def: &ElementDef,
+        header: &Header,
+        name: &str,
+    ) -> Result<Vec<E>, FormatError> {
+        match self {
+            Payload::Ascii(lines) => read_ascii_element(lines, element_name, def, name),
+            Payload::Binary(reader) => Parser::<E>::new()
+                .read_payload_for_element(reader, def, header)
+                .map_err(|e| ply_error(name, &e)),
+        }
+    }
+
+    /// Logs what follows the last element (ignored, as `ply-rs-bw` ignores it).
+    fn note_leftover(&mut self, file_len: usize, name: &str) -> Result<(), FormatError> {
+        match self {
+            Payload::Ascii(lines) => {
+                if let Some((line_number, _)) = lines.next_line(name)? {
+                    tracing::debug!(
+                        "{name}: ignored the lines from {line_number} on, after the last element"
+                    );
+                }
+            }
+            Payload::Binary(reader) => {
+                let unread = file_len as u64 - reader.get_ref().position();
+                if unread > 0 {
+                    tracing::debug!("{name}: ignored {unread} bytes after the last element");
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A `ply-rs-bw` error about the file `name`, in one line.
+fn ply_error(name: &str, error: &ply_rs_bw::parser::ParseError) -> FormatError {
+    FormatError::malformed(name, one_line(&error.to_string()))
 }
 
 /// `ply-rs-bw` messages span several tab-indented lines, and header errors end in a dump of
