@@ -1,6 +1,7 @@
 //! The per-frame path: deproject, segment, track and fuse, then hand dirty objects to the
 //! mesher. Runs on one thread, which owns the tracker and the plane tracker.
 
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
@@ -37,8 +38,6 @@ pub struct Perception {
     /// Last frame's support planes: segmentation refines them instead of searching anew.
     plane_hints: Vec<SupportPlane>,
     malformed_logged: bool,
-    /// The end of the stream was seen and its last mesh jobs handed out.
-    flushed: bool,
 }
 
 impl Perception {
@@ -50,7 +49,6 @@ impl Perception {
             segment: SegmentConfig::live(),
             plane_hints: Vec::new(),
             malformed_logged: false,
-            flushed: false,
         }
     }
 
@@ -60,7 +58,10 @@ impl Perception {
         loop {
             match shared.ring.pop_timeout(Duration::from_millis(200)) {
                 Pop::Item(observation) => self.process(shared, observation),
-                Pop::TimedOut if !self.flushed && shared.every_stream_ended() => {
+                Pop::TimedOut
+                    if shared.every_stream_ended()
+                        && !shared.end_of_stream_flushed.load(Ordering::Acquire) =>
+                {
                     self.end_of_stream(shared);
                 }
                 Pop::TimedOut => {}
@@ -75,12 +76,8 @@ impl Perception {
     /// one-shot recording still gives meshes of what it showed, and says what it did. A
     /// failure to mesh one of these is a warning from the mesher.
     fn end_of_stream(&mut self, shared: &Shared) {
-        self.flushed = true;
         let flushed = self.objects.flush_mesh_jobs();
-        let frames = shared
-            .counters
-            .frames_processed
-            .load(std::sync::atomic::Ordering::Relaxed);
+        let frames = shared.counters.frames_processed.load(Ordering::Relaxed);
         if self.objects.is_empty() {
             tracing::warn!(
                 "end of stream after {frames} frame{}: no object to mesh: no cluster of at \
@@ -104,17 +101,21 @@ impl Perception {
                 held_back.join(", ")
             );
         }
+        self.count_confirmed(shared);
+        for (job, _) in flushed {
+            shared.mesh_queue.submit(job);
+        }
+        shared.end_of_stream_flushed.store(true, Ordering::Release);
+    }
+
+    /// Confirmed objects only: a cluster seen in one or two frames (noise at long range, a
+    /// passing hand) is tracked but is not yet an object anyone is told about.
+    fn count_confirmed(&self, shared: &Shared) {
         let confirmed = self.objects.objects().filter(|o| o.confirmed).count();
         shared
             .counters
             .objects_tracked
-            .store(confirmed as u64, std::sync::atomic::Ordering::Relaxed);
-        for (job, _) in flushed {
-            shared.mesh_queue.submit(job);
-        }
-        shared
-            .end_of_stream_flushed
-            .store(true, std::sync::atomic::Ordering::Release);
+            .store(confirmed as u64, Ordering::Relaxed);
     }
 
     fn process(&mut self, shared: &Shared, observation: Observation) {
@@ -232,12 +233,7 @@ impl Perception {
             for &(id, pose) in &report.moved {
                 board.move_to(id, pose, capture_time, &shared.publisher, counters);
             }
-            // Confirmed objects only: a cluster seen in one or two frames (noise at long range,
-            // a passing hand) is tracked but is not yet an object anyone is told about.
-            let confirmed = self.objects.objects().filter(|o| o.confirmed).count();
-            counters
-                .objects_tracked
-                .store(confirmed as u64, std::sync::atomic::Ordering::Relaxed);
+            self.count_confirmed(shared);
         }
         for job in self.objects.take_mesh_jobs(capture_time) {
             shared.mesh_queue.submit(job);
