@@ -331,12 +331,9 @@ impl ObjectMap {
                 cells = object.grid.len(),
                 "mesh job"
             );
-            object.change.mark_meshed(&object.grid);
-            object.meshing_runs += 1;
-            object.last_meshed = Some(now_capture);
-            self.meshing_runs += 1;
-            jobs.push(Self::job_of(object, false));
+            jobs.push(Self::mesh_job(object, now_capture, false));
         }
+        self.meshing_runs += jobs.len() as u64;
         jobs
     }
 
@@ -365,16 +362,19 @@ impl ObjectMap {
                     changed_fraction: object.change.changed_fraction(),
                 }
             };
-            object.change.mark_meshed(&object.grid);
-            object.meshing_runs += 1;
-            object.last_meshed = Some(object.last_seen);
-            self.meshing_runs += 1;
-            jobs.push((Self::job_of(object, true), held_back));
+            let at = object.last_seen;
+            jobs.push((Self::mesh_job(object, at, true), held_back));
         }
+        self.meshing_runs += jobs.len() as u64;
         jobs
     }
 
-    fn job_of(object: &TrackedObject, end_of_stream: bool) -> MeshJob {
+    /// A job of `object`'s current state, which is marked meshed at `at` and counted as one of
+    /// its meshing runs.
+    fn mesh_job(object: &mut TrackedObject, at: Duration, end_of_stream: bool) -> MeshJob {
+        object.change.mark_meshed(&object.grid);
+        object.meshing_runs += 1;
+        object.last_meshed = Some(at);
         MeshJob {
             object_id: object.id,
             grid: object.grid.clone(),
