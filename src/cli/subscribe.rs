@@ -136,21 +136,27 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
 /// a four-billionth object.
 struct Id(u64);
 
+impl Id {
+    /// `("object", id)` or `("plane", N)`.
+    fn kind_and_number(&self) -> (&'static str, u64) {
+        match self.0.checked_sub(FIRST_PLANE_ID) {
+            Some(k) => ("plane", k + 1),
+            None => ("object", self.0),
+        }
+    }
+}
+
 impl std::fmt::Display for Id {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0.checked_sub(FIRST_PLANE_ID) {
-            Some(k) => write!(f, "plane {}", k + 1),
-            None => write!(f, "object {}", self.0),
-        }
+        let (kind, number) = self.kind_and_number();
+        write!(f, "{kind} {number}")
     }
 }
 
 /// `object-ID.ply` or `plane-N.ply`, as [`Id`] names it.
 fn file_name(object_id: u64) -> String {
-    match object_id.checked_sub(FIRST_PLANE_ID) {
-        Some(k) => format!("plane-{}.ply", k + 1),
-        None => format!("object-{object_id}.ply"),
-    }
+    let (kind, number) = Id(object_id).kind_and_number();
+    format!("{kind}-{number}.ply")
 }
 
 /// What was last shown of an object, to tell a move of the same mesh from a new mesh.
