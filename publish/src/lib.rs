@@ -520,7 +520,7 @@ fn accept_loop(shared: &Arc<Shared>, listener: std::os::unix::net::UnixListener)
 fn refuse(mut stream: UnixStream, why: &str) {
     use std::io::{Read, Write};
     let mut goodbye = Vec::new();
-    let reason: String = why.chars().take(MAX_REASON_BYTES / 4).collect();
+    let reason = cap_at_char_boundary(why, MAX_REASON_BYTES).to_owned();
     if encode(&Message::Goodbye { reason }, &mut goodbye).is_err()
         || stream.set_nonblocking(true).is_err()
     {
