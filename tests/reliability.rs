@@ -31,7 +31,7 @@ const MIB: u64 = 1024 * 1024;
 /// for: "reopened", the final counters). Not `tests/daemon.rs`'s `Daemon`: these tests also
 /// need extra arguments (`--unpaced`), the daemon's pid (RSS, SIGKILL) and a socket path that
 /// outlives one daemon (a restart on the same path).
-struct Run {
+pub(crate) struct Run {
     child: Child,
     socket: PathBuf,
     log: Arc<Mutex<String>>,
@@ -40,7 +40,7 @@ struct Run {
 impl Run {
     /// Starts `tacmesh run ARGS --socket SOCKET` and waits until the socket answers (a stale
     /// socket file left by a killed daemon does not).
-    fn start(args: &[&str], socket: &Path) -> Run {
+    pub(crate) fn start(args: &[&str], socket: &Path) -> Run {
         let mut child = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
             .arg("run")
             .args(args)
@@ -85,7 +85,7 @@ impl Run {
         run
     }
 
-    fn log(&self) -> String {
+    pub(crate) fn log(&self) -> String {
         self.log.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
@@ -101,16 +101,16 @@ impl Run {
         false
     }
 
-    fn subscribe(&self) -> Subscription {
+    pub(crate) fn subscribe(&self) -> Subscription {
         Subscription::connect(&self.socket, Some(Duration::from_secs(10))).expect("subscribes")
     }
 
-    fn running(&mut self) -> bool {
+    pub(crate) fn running(&mut self) -> bool {
         self.child.try_wait().expect("waits").is_none()
     }
 
     /// The daemon's resident set now, KiB (`VmRSS` in `/proc/PID/status`).
-    fn rss_kib(&self) -> u64 {
+    pub(crate) fn rss_kib(&self) -> u64 {
         let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
             .expect("the daemon's /proc status");
         status
@@ -121,7 +121,7 @@ impl Run {
     }
 
     /// Sends SIGTERM; returns the exit status and how long the exit took.
-    fn terminate(&mut self) -> (ExitStatus, Duration) {
+    pub(crate) fn terminate(&mut self) -> (ExitStatus, Duration) {
         crate::util::terminate(&mut self.child, Duration::from_secs(15))
     }
 

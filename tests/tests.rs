@@ -7,6 +7,7 @@ mod cli_help;
 mod daemon;
 mod offline_pipeline;
 mod real_scans;
+mod real_scenes;
 mod reliability;
 mod replay;
 mod systemd;

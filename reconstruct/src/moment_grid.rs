@@ -59,6 +59,22 @@ impl MomentGrid {
         Some((cell, moments))
     }
 
+    /// Takes `part` (moments that were added to `cell` before: a share of its points) out of
+    /// `cell`, and empties the voxel when what is left weighs less than `min_count` points.
+    /// Returns whether the voxel is gone. For forgetting (see `tacmesh_track`), where the
+    /// share is a scaled copy of the voxel's own moments or of a finer voxel's inside it.
+    pub fn subtract(&mut self, cell: IVec3, part: &PointMoments, min_count: f64) -> bool {
+        let Some(moments) = self.cells.get_mut(&cell) else {
+            return true;
+        };
+        *moments -= part;
+        if moments.count < min_count {
+            self.cells.remove(&cell);
+            return true;
+        }
+        false
+    }
+
     /// Occupied voxels with their moments, in hash order (use [`Self::sorted_cells`] where the
     /// order matters).
     pub fn iter(&self) -> impl Iterator<Item = (IVec3, &PointMoments)> + '_ {
@@ -132,6 +148,26 @@ mod tests {
             grid.cell_of(Vec3::new(-0.01, 0.15, -0.2)),
             IVec3::new(-1, 1, -2)
         );
+    }
+
+    #[test]
+    fn subtracting_a_share_keeps_the_plane_and_empties_a_light_voxel() {
+        let mut grid = MomentGrid::new(1.0);
+        grid.integrate(&[
+            Vec3::new(0.1, 0.1, 0.5),
+            Vec3::new(0.9, 0.2, 0.5),
+            Vec3::new(0.5, 0.8, 0.5),
+            Vec3::new(0.4, 0.4, 0.5),
+        ]);
+        let whole = *grid.get(IVec3::ZERO).unwrap();
+        assert!(!grid.subtract(IVec3::ZERO, &whole.scaled(0.75), 0.5));
+        let left = grid.get(IVec3::ZERO).unwrap();
+        assert!((left.count - 1.0).abs() < 1e-12);
+        assert!(left.centroid().unwrap().distance(whole.centroid().unwrap()) < 1e-6);
+        assert!(left.plane().is_none(), "one point's weight fits no plane");
+        let left = *left;
+        assert!(grid.subtract(IVec3::ZERO, &left.scaled(0.6), 0.5));
+        assert!(grid.is_empty());
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! cheap to query at any scale (sum the voxels of a neighbourhood, then fit once).
 
 use std::cmp::Ordering;
-use std::ops::AddAssign;
+use std::ops::{AddAssign, SubAssign};
 
 use glam::{DMat3, DVec3, Vec3};
 
@@ -40,6 +40,17 @@ impl PointMoments {
         o[3] += p.y * p.y;
         o[4] += p.y * p.z;
         o[5] += p.z * p.z;
+    }
+
+    /// The same points weighed by `factor` (moments scale linearly, so the centroid and
+    /// covariance, and with them the plane, are unchanged; only the weight is). The fused
+    /// state's forgetting (a weight cap, free-space carving) is this scaling.
+    pub fn scaled(&self, factor: f64) -> PointMoments {
+        PointMoments {
+            count: self.count * factor,
+            sum: self.sum * factor,
+            sum_outer: self.sum_outer.map(|v| v * factor),
+        }
     }
 
     pub fn centroid(&self) -> Option<Vec3> {
@@ -85,6 +96,16 @@ impl AddAssign<&PointMoments> for PointMoments {
         self.sum += other.sum;
         for (a, b) in self.sum_outer.iter_mut().zip(other.sum_outer) {
             *a += b;
+        }
+    }
+}
+
+impl SubAssign<&PointMoments> for PointMoments {
+    fn sub_assign(&mut self, other: &PointMoments) {
+        self.count -= other.count;
+        self.sum -= other.sum;
+        for (a, b) in self.sum_outer.iter_mut().zip(other.sum_outer) {
+            *a -= b;
         }
     }
 }

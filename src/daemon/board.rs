@@ -72,6 +72,24 @@ impl Board {
         }
     }
 
+    /// The object's frame was moved (its fused state restarted, with its origin at the new
+    /// cluster): the stored mesh is re-expressed in the new frame, so that it stays where it
+    /// was in the world until its next mesh replaces it, and nothing is published. Without
+    /// this, the next mesh (made in the new frame) went out at the old frame's pose, off by
+    /// the distance between the two origins (2–3 cm on the mOSD scene changes).
+    pub fn reframe(&mut self, id: u64, world_from_object: Affine3A) {
+        let Some(entry) = self.entries.get_mut(&id) else {
+            return;
+        };
+        let new_from_old = world_from_object.inverse() * entry.world_from_object;
+        entry.world_from_object = world_from_object;
+        if let Some(mesh) = &mut entry.mesh {
+            for v in &mut mesh.mesh_in_object.vertices {
+                *v = new_from_old.transform_point3(*v);
+            }
+        }
+    }
+
     /// A new mesh of the object (in its own frame), made from data up to `capture_time`.
     /// Ignored if the object was removed meanwhile.
     pub fn new_mesh(
@@ -123,5 +141,42 @@ impl Board {
             }
             Err(err) => tracing::warn!("object {id}: not published: {err}"),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// A restarted object's stored mesh stays where it was in the world in its new frame.
+    #[test]
+    fn reframing_keeps_the_stored_mesh_in_place_in_the_world() {
+        let mut board = Board::default();
+        let old = Affine3A::from_translation(Vec3::new(1.0, 0.0, 0.0));
+        board.create(7, old);
+        let vertices = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
+        board.entries.get_mut(&7).expect("created").mesh = Some(Published {
+            mesh_in_object: TriMesh::new(vertices.clone(), vec![[0, 1, 2]]),
+            stats: SimplifyStats {
+                faces_in: 1,
+                faces_out: 1,
+                max_residual_m: 0.0,
+            },
+            capture_time: Duration::ZERO,
+        });
+        let new = Affine3A::from_rotation_translation(
+            glam::Quat::from_rotation_z(0.5),
+            Vec3::new(0.2, 0.3, 0.0),
+        );
+        board.reframe(7, new);
+        let entry = &board.entries[&7];
+        assert_eq!(entry.world_from_object, new);
+        let mesh = &entry.mesh.as_ref().expect("kept").mesh_in_object;
+        for (v, original) in mesh.vertices.iter().zip(&vertices) {
+            let world = new.transform_point3(*v);
+            assert!(world.distance(old.transform_point3(*original)) < 1e-5);
+        }
+        assert_eq!(entry.version, 0, "nothing published");
     }
 }

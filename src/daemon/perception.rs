@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use tacmesh_segment::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
 use tacmesh_source::{FrameError, Observation};
-use tacmesh_track::{FrameClusters, ObjectMap, TrackConfig};
+use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
 
 use super::config::DaemonConfig;
 
@@ -121,7 +121,7 @@ impl Perception {
     fn process(&mut self, shared: &Shared, observation: Observation) {
         let counters = &shared.counters;
         let started = Instant::now();
-        let (points, organised, capture_time, viewpoint) = match observation {
+        let (points, organised, capture_time, world_from_sensor) = match observation {
             Observation::Depth(frame) => {
                 if let Err(err) = frame.check() {
                     self.malformed(shared, &err);
@@ -134,7 +134,7 @@ impl Perception {
                     deprojection.points_in_world,
                     Some((frame.intrinsics.width, frame.intrinsics.height)),
                     frame.capture_time,
-                    Vec3::from(frame.world_from_sensor.translation),
+                    frame.world_from_sensor,
                 )
             }
             Observation::Cloud {
@@ -147,14 +147,10 @@ impl Perception {
                     .iter()
                     .map(|&p| world_from_sensor.transform_point3(p))
                     .collect();
-                (
-                    points,
-                    None,
-                    capture_time,
-                    Vec3::from(world_from_sensor.translation),
-                )
+                (points, None, capture_time, world_from_sensor)
             }
         };
+        let viewpoint = Vec3::from(world_from_sensor.translation);
         counters.record(Stage::Deproject, started.elapsed());
 
         let started = Instant::now();
@@ -202,6 +198,7 @@ impl Perception {
             capture_time,
             viewpoint_m: viewpoint,
             clusters,
+            free_space: Some(FreeSpace::from_points(&points, world_from_sensor)),
         });
         counters.record(Stage::Integrate, started.elapsed());
         Counters::add(&counters.frames_processed, 1);
@@ -224,6 +221,11 @@ impl Perception {
             for &id in &report.created {
                 if let Some(object) = self.objects.objects().find(|o| o.id == id) {
                     board.create(id, object.world_from_object);
+                }
+            }
+            for &id in &report.reset {
+                if let Some(object) = self.objects.objects().find(|o| o.id == id) {
+                    board.reframe(id, object.world_from_object);
                 }
             }
             for &id in &report.removed {

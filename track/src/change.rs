@@ -92,6 +92,18 @@ impl ChangeTracker {
         }
     }
 
+    /// Records that `cell` was forgotten (its weight carved away, see `crate::free_space`).
+    /// A voxel that was part of the surface at the last meshing is a change of the weight it
+    /// had there; one that never was is none. Refilled later, it counts as new.
+    pub fn note_removed(&mut self, cell: IVec3) {
+        let before = self.counts_at_meshing.remove(&cell).unwrap_or(0);
+        let weight = u64::from(before.min(self.saturated_points));
+        self.total_weight = self.total_weight.saturating_sub(weight);
+        if before >= self.occupied_points && self.changed.insert(cell) {
+            self.changed_weight += weight;
+        }
+    }
+
     /// Voxels that changed enough since the last meshing.
     pub fn changed_cells(&self) -> usize {
         self.changed.len()
@@ -102,7 +114,7 @@ impl ChangeTracker {
         if self.total_weight == 0 {
             0.0
         } else {
-            (self.changed_weight as f64 / self.total_weight as f64) as f32
+            (self.changed_weight as f64 / self.total_weight as f64).min(1.0) as f32
         }
     }
 
@@ -214,6 +226,32 @@ mod tests {
             "{}",
             tracker.changed_fraction()
         );
+    }
+
+    #[test]
+    fn a_forgotten_surface_voxel_is_a_change_and_an_unmeshed_one_is_not() {
+        let mut grid = MomentGrid::new(1.0);
+        let mut tracker = ChangeTracker::new(4, 64);
+        // Round after round, so that no voxel fills up while its neighbours are empty.
+        for _ in 0..64 {
+            for i in 0..10 {
+                fill(
+                    &mut grid,
+                    &mut tracker,
+                    Vec3::new(i as f32 + 0.5, 0.5, 0.5),
+                    1,
+                );
+            }
+        }
+        tracker.mark_meshed(&grid);
+        assert_eq!(tracker.changed_cells(), 0);
+        tracker.note_removed(IVec3::new(20, 0, 0));
+        assert_eq!(tracker.changed_cells(), 0, "never meshed");
+        for i in 1..=5 {
+            tracker.note_removed(IVec3::new(i, 0, 0));
+        }
+        assert_eq!(tracker.changed_cells(), 5);
+        assert!((tracker.changed_fraction() - 1.0).abs() < 1e-6);
     }
 
     #[test]

@@ -51,6 +51,21 @@ pub struct TrackConfig {
     /// below it a voxel whose count doubled since the last meshing has changed, at it the voxel
     /// is settled. Default 64.
     pub saturated_cell_points: u32,
+    /// Weight cap of a fused voxel, in points: a full voxel forgets one point's worth for each
+    /// point it gains, so it averages its newest points and jitter or drift cannot pile up
+    /// (see `TrackedObject`'s fusion). Default 256: about 25 frames of a surface voxel at 1 m,
+    /// and four times `saturated_cell_points`, so planes are as steady as without a cap.
+    pub max_cell_points: u32,
+    /// Share of a voxel's weight forgotten each frame that sees through it (free-space
+    /// carving, see `crate::free_space`); 0 turns carving off. Default 0.3.
+    pub carve_fraction: f32,
+    /// A voxel is seen through when the nearest surface measured in its direction is farther
+    /// than the voxel by `carve_margin_m + carve_margin_per_m2 · z²` (z its depth, metres):
+    /// depth noise and a stereo or structured-light camera's disparity step grow with z².
+    /// Defaults 0.015 m and 0.005 /m (2 cm at 1 m, 7.6 cm at 3.5 m, where a Kinect's depth
+    /// step is 4.5 cm).
+    pub carve_margin_m: f32,
+    pub carve_margin_per_m2: f32,
     /// Translation of the object's origin below which an aligned pose is taken as noise and
     /// the published pose is kept, metres. Default 0.0025 (half a voxel).
     pub move_threshold_m: f32,
@@ -99,6 +114,10 @@ impl Default for TrackConfig {
             min_cluster_points: 20,
             occupied_cell_points: 4,
             saturated_cell_points: 64,
+            max_cell_points: 256,
+            carve_fraction: 0.3,
+            carve_margin_m: 0.015,
+            carve_margin_per_m2: 0.005,
             move_threshold_m: 0.0025,
             move_threshold_rad: 1f32.to_radians(),
             icp_coarse_factor: 4,
@@ -150,6 +169,11 @@ impl TrackConfig {
                 self.icp_prior_weight,
                 "small, such as 1e-3",
             ),
+            (
+                "carve_margin_m",
+                self.carve_margin_m,
+                "a few times the depth noise near the camera, such as 0.015",
+            ),
         ];
         for (name, value, hint) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -181,7 +205,22 @@ impl TrackConfig {
                 saturated: self.saturated_cell_points,
             });
         }
+        if self.max_cell_points < self.saturated_cell_points {
+            return Err(TrackError::NotPositive {
+                name: "max_cell_points",
+                value: f64::from(self.max_cell_points),
+                hint: "at least `saturated_cell_points`; about 256",
+            });
+        }
+        if !(self.carve_margin_per_m2.is_finite() && self.carve_margin_per_m2 >= 0.0) {
+            return Err(TrackError::NotPositive {
+                name: "carve_margin_per_m2",
+                value: f64::from(self.carve_margin_per_m2),
+                hint: "0 or more, such as 0.005",
+            });
+        }
         for (name, value) in [
+            ("carve_fraction", self.carve_fraction),
             ("remesh_min_change", self.remesh_min_change),
             ("icp_degenerate_ratio", self.icp_degenerate_ratio),
             ("icp_min_inlier_fraction", self.icp_min_inlier_fraction),

@@ -15,15 +15,18 @@
 //!
 //! Modules, in the order a frame runs through them: [`associate`] (greedy nearest centroids),
 //! [`icp`] (point-to-plane alignment to the fused moments, with [`solve6`]), [`object`]
-//! (pose dead band, fusion), [`change`] (the dirty measure), [`object_map`] (the whole).
+//! (pose dead band, fusion with a weight cap), [`free_space`] (what the frame saw through,
+//! which the objects forget), [`change`] (the dirty measure), [`object_map`] (the whole).
 
 pub mod associate;
 pub mod change;
 pub mod config;
+pub mod free_space;
 pub mod icp;
 pub mod object;
 pub mod object_map;
 pub mod solve6;
 
 pub use config::{TrackConfig, TrackError};
+pub use free_space::FreeSpace;
 pub use object_map::{FrameClusters, FrameReport, HeldBack, MeshJob, ObjectMap, ObjectSummary};

@@ -24,12 +24,14 @@
 
 use std::time::Duration;
 
-use glam::{Affine3A, Quat, Vec3};
+use glam::{Affine3A, IVec3, Quat, Vec3};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tacmesh_reconstruct::moments::PointMoments;
 use tracing::debug;
 
 use crate::change::ChangeTracker;
 use crate::config::TrackConfig;
+use crate::free_space::{DepthMargin, FreeSpace};
 use crate::icp::{align_to_grids, CentroidAnchor, IcpFailure, IcpLevel, IcpScratch, IcpSettings};
 
 /// Fraction of a cluster's points that must find the fused surface for a fine-only alignment
@@ -40,6 +42,9 @@ const FAMILIAR_FRACTION: f32 = 0.8;
 /// averages out the centroid's jitter from frame to frame (a random sample of the visible
 /// surface) while still following a visible part that changes as the object turns.
 const CENTROID_SMOOTHING: f32 = 0.1;
+
+/// Lines of sight this far apart see different sides of an object (45°).
+const ANOTHER_SIDE_RAD: f32 = std::f32::consts::FRAC_PI_4;
 
 /// Rigid velocity in the object's own frame, about its origin.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -147,6 +152,7 @@ impl TrackedObject {
             centroid_in_world,
             capture_time,
             viewpoint_in_world,
+            config,
         );
         object
     }
@@ -209,6 +215,7 @@ impl TrackedObject {
             centroid_in_world,
             capture_time,
             viewpoint_in_world,
+            config,
         );
         outcome
     }
@@ -325,6 +332,21 @@ impl TrackedObject {
         covered as f32 / points_in_world.len() as f32
     }
 
+    /// Whether a sensor at `viewpoint_in_world` sees the object from another side than its
+    /// last frame did: the two lines of sight to the object's centroid are more than
+    /// [`ANOTHER_SIDE_RAD`] apart.
+    pub fn seen_from_another_side(&self, viewpoint_in_world: Vec3) -> bool {
+        let centroid = self
+            .world_from_object
+            .transform_point3(self.centroid_in_object);
+        let last = self
+            .world_from_object
+            .transform_point3(self.viewpoint_in_object)
+            - centroid;
+        let now = viewpoint_in_world - centroid;
+        last.angle_between(now) > ANOTHER_SIDE_RAD
+    }
+
     /// The box of the fused points in the world at the current pose, grown by `margin_m`;
     /// `None` before any point.
     pub fn world_bounds(&self, margin_m: f32) -> Option<(Vec3, Vec3)> {
@@ -353,17 +375,40 @@ impl TrackedObject {
     /// side face seen at a grazing angle, or its far side seen by a second camera) at the
     /// current pose, and counts the object as seen. Pose, velocity and centroid are left to
     /// the main cluster.
-    pub fn fuse_fragment(&mut self, points_in_world: &[Vec3], capture_time: Duration) {
+    pub fn fuse_fragment(
+        &mut self,
+        points_in_world: &[Vec3],
+        capture_time: Duration,
+        config: &TrackConfig,
+    ) {
         self.last_seen = self.last_seen.max(capture_time);
-        self.add_points(points_in_world);
+        self.add_points(points_in_world, config);
     }
 
     /// Adds world points to the fused grids at the current pose (with their change
     /// accounting and the fused box); returns how many were finite and added.
-    fn add_points(&mut self, points_in_world: &[Vec3]) -> u64 {
+    ///
+    /// A voxel holding `max_cell_points` first forgets one point's worth of its weight (its
+    /// moments scaled down to `max_cell_points − 1`, which keeps their plane): a running average over about
+    /// that many of its newest points. The fused state thus follows the recent data, and
+    /// camera jitter or slow drift cannot pile up in it for ever (nvblox caps and decays
+    /// weights for the same reason).
+    fn add_points(&mut self, points_in_world: &[Vec3], config: &TrackConfig) -> u64 {
         let mut added = 0;
+        let cap = f64::from(config.max_cell_points);
+        let factor = self.coarse_factor();
         for &p_in_world in points_in_world {
             let p_in_object = self.object_from_world.transform_point3(p_in_world);
+            if !p_in_object.is_finite() {
+                continue;
+            }
+            let cell = self.grid.cell_of(p_in_object);
+            if let Some(full) = self.grid.get(cell).filter(|m| m.count > cap - 1.0) {
+                let oldest = full.scaled(1.0 - (cap - 1.0) / full.count);
+                self.grid.subtract(cell, &oldest, 0.0);
+                self.coarse
+                    .subtract(cell.div_euclid(IVec3::splat(factor)), &oldest, 0.0);
+            }
             if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
                 let count = moments.count as u32;
                 self.change.note_point(&self.grid, cell, count);
@@ -377,6 +422,69 @@ impl TrackedObject {
         added
     }
 
+    /// The coarse grid's voxel in fused voxels.
+    fn coarse_factor(&self) -> i32 {
+        (self.coarse.voxel_size_m() / self.grid.voxel_size_m()).round() as i32
+    }
+
+    /// Forgets what the frame saw through (see `crate::free_space`): each fused voxel whose
+    /// centroid the sensor now sees past loses `carve_fraction` of its weight, and is dropped
+    /// once it weighs less than one point. A removed or replaced object is thus erased within
+    /// a few frames (at 0.3, a voxel of 256 points is gone in 16 frames, half a second at 30
+    /// fps), and a voxel that one noisy frame contradicts loses little. Returns the voxels
+    /// dropped.
+    pub fn carve(&mut self, free: &FreeSpace, config: &TrackConfig) -> usize {
+        if config.carve_fraction <= 0.0 {
+            return 0;
+        }
+        let margin = DepthMargin {
+            margin_m: config.carve_margin_m,
+            per_m2: config.carve_margin_per_m2,
+        };
+        let seen_through: Vec<(IVec3, PointMoments)> = self
+            .grid
+            .iter()
+            .filter_map(|(cell, m)| {
+                let centroid = m.centroid()?;
+                free.seen_through(self.world_from_object.transform_point3(centroid), &margin)
+                    .then_some((cell, *m))
+            })
+            .collect();
+        let factor = self.coarse_factor();
+        let mut dropped = 0;
+        for (cell, moments) in seen_through {
+            let forget = if moments.count * (1.0 - f64::from(config.carve_fraction)) < 1.0 {
+                moments
+            } else {
+                moments.scaled(f64::from(config.carve_fraction))
+            };
+            let gone = self.grid.subtract(cell, &forget, 1.0);
+            // The coarse voxel loses the same share; its own emptiness follows its finer
+            // voxels (rounding can leave a speck of weight behind).
+            self.coarse
+                .subtract(cell.div_euclid(IVec3::splat(factor)), &forget, 0.5);
+            if gone {
+                self.change.note_removed(cell);
+                dropped += 1;
+            }
+        }
+        if dropped > 0 {
+            self.bounds_in_object = self
+                .grid
+                .iter()
+                .filter_map(|(_, m)| m.centroid())
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), c| {
+                    (lo.min(c), hi.max(c))
+                });
+        }
+        dropped
+    }
+
+    /// The points' worth of weight the fused state holds.
+    pub fn fused_weight(&self) -> f64 {
+        self.grid.iter().map(|(_, m)| m.count).sum()
+    }
+
     /// Adds the cluster to the fused state with the current pose.
     fn fuse(
         &mut self,
@@ -384,8 +492,9 @@ impl TrackedObject {
         centroid_in_world: Vec3,
         capture_time: Duration,
         viewpoint_in_world: Vec3,
+        config: &TrackConfig,
     ) {
-        let points_added = self.add_points(points_in_world);
+        let points_added = self.add_points(points_in_world, config);
         let centroid_in_object = self.object_from_world.transform_point3(centroid_in_world);
         self.centroid_in_object = if self.points_fused == points_added {
             centroid_in_object

@@ -11,6 +11,7 @@ use tracing::{debug, info};
 
 use crate::associate::associate_greedy;
 use crate::config::{TrackConfig, TrackError};
+use crate::free_space::FreeSpace;
 use crate::icp::IcpScratch;
 use crate::object::{Observed, TrackedObject};
 
@@ -31,6 +32,10 @@ pub struct FrameClusters {
     pub viewpoint_m: Vec3,
     /// World points of each segmented object, metres. Non-finite points are skipped.
     pub clusters: Vec<Vec<Vec3>>,
+    /// What the frame saw through ([`FreeSpace::from_points`] of all its points, planes and
+    /// background included): fused voxels it sees past are forgotten. `None` forgets nothing
+    /// (a sensor whose rays are unknown).
+    pub free_space: Option<FreeSpace>,
 }
 
 /// What one frame did to the map.
@@ -38,8 +43,11 @@ pub struct FrameClusters {
 pub struct FrameReport {
     /// New objects, by id.
     pub created: Vec<u64>,
-    /// Objects not seen for `leave_after`, now gone.
+    /// Objects gone: not seen for `leave_after`, or seen through (their fused state carved
+    /// away, see `TrackedObject::carve`).
     pub removed: Vec<u64>,
+    /// Fused voxels forgotten this frame because the frame saw through them.
+    pub carved_cells: usize,
     /// Objects that moved, with their new `world_from_object` (republish the last mesh there;
     /// no re-meshing needed).
     pub moved: Vec<(u64, Affine3A)>,
@@ -244,11 +252,19 @@ impl ObjectMap {
                     if cluster_hi.cmplt(lo).any() || cluster_lo.cmpgt(hi).any() {
                         return None;
                     }
-                    let inside = points
-                        .iter()
-                        .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
-                        .count() as f32
-                        / points.len().max(1) as f32;
+                    // The box test is for a far side, which only another viewpoint sees: from
+                    // the object's last viewpoint, a separate cluster inside the box is
+                    // another object beside or on top of it (taking those in merged
+                    // stacked objects and grew a box that then took in the next scene's).
+                    let inside = if o.seen_from_another_side(frame.viewpoint_m) {
+                        points
+                            .iter()
+                            .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
+                            .count() as f32
+                            / points.len().max(1) as f32
+                    } else {
+                        0.0
+                    };
                     let share = if inside >= FRAGMENT_COVERAGE {
                         inside
                     } else {
@@ -260,7 +276,7 @@ impl ObjectMap {
                 .max_by(|a, b| a.0.total_cmp(&b.0));
             if let Some((share, id)) = host {
                 if let Some(object) = self.objects.get_mut(&id) {
-                    object.fuse_fragment(points, now);
+                    object.fuse_fragment(points, now, &self.config);
                     debug!(
                         id,
                         points = points.len(),
@@ -279,6 +295,25 @@ impl ObjectMap {
             self.objects.insert(id, object);
             report.created.push(id);
             report.cluster_ids[ci] = Some(id);
+        }
+
+        // Forget what the frame saw through, after fusing it (its own points are never seen
+        // through: they are the nearest surface in their direction). An object left with less
+        // than a cluster's worth of weight was taken away, or was never there (a smear of a
+        // bad alignment): it is gone now, not `leave_after` later.
+        if let Some(free) = &frame.free_space {
+            let mut vanished = Vec::new();
+            for object in self.objects.values_mut() {
+                report.carved_cells += object.carve(free, &self.config);
+                if object.fused_weight() < self.config.min_cluster_points as f64 {
+                    vanished.push(object.id);
+                }
+            }
+            for id in vanished {
+                self.objects.remove(&id);
+                info!(id, "object gone: the camera sees through where it was");
+                report.removed.push(id);
+            }
         }
 
         // Expired only after matching: a track this frame saw is not gone, however long the
@@ -300,6 +335,7 @@ impl ObjectMap {
         debug!(
             capture_s = now.as_secs_f64(),
             clusters = frame.clusters.len(),
+            carved = report.carved_cells,
             objects = self.objects.len(),
             moved = report.moved.len(),
             "frame integrated"

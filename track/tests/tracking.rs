@@ -376,6 +376,7 @@ fn empty_and_non_finite_clusters_do_not_panic() {
         capture_time: FRAME * 6,
         viewpoint_m: Vec3::NAN,
         clusters: vec![],
+        free_space: None,
     });
 }
 

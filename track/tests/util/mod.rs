@@ -94,6 +94,7 @@ pub fn frame(index: u32, clusters: Vec<Vec<Vec3>>) -> FrameClusters {
         capture_time: FRAME * index,
         viewpoint_m: Vec3::ZERO,
         clusters,
+        free_space: None,
     }
 }
 

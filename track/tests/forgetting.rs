@@ -1,0 +1,160 @@
+//! The fused state forgets: what the camera now sees through is carved away, and no voxel
+//! keeps more than its cap of past points.
+
+mod util;
+
+use std::time::Duration;
+
+use glam::{Affine3A, Vec3};
+use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
+use util::{at, rng, view, Body, FRAME};
+
+/// A wall of points `depth_m` in front of the sensor (at the origin, looking along +z),
+/// 2 mm apart like a VGA depth camera's pixels at 1 m, covering ±0.3 m.
+fn wall(depth_m: f32) -> Vec<Vec3> {
+    (-150..=150)
+        .flat_map(|i| (-150..=150).map(move |j| Vec3::new(i as f32, j as f32, 0.0) * 0.002))
+        .map(|p| p + Vec3::Z * depth_m)
+        .collect()
+}
+
+/// One frame: the objects' clusters, and the free space of everything the camera saw (the
+/// clusters and the background, nearer points hiding farther ones per direction).
+fn frame(index: u32, clusters: Vec<Vec<Vec3>>, background: &[Vec3]) -> FrameClusters {
+    let mut all: Vec<Vec3> = background.to_vec();
+    all.extend(clusters.iter().flatten());
+    FrameClusters {
+        capture_time: FRAME * index,
+        viewpoint_m: Vec3::ZERO,
+        free_space: Some(FreeSpace::from_points(&all, Affine3A::IDENTITY)),
+        clusters,
+    }
+}
+
+/// Objects stay until seen through, not until a timeout: a long `leave_after`.
+fn patient_map() -> ObjectMap {
+    ObjectMap::new(TrackConfig {
+        leave_after: Duration::from_secs(60),
+        ..TrackConfig::default()
+    })
+    .expect("valid config")
+}
+
+const CUBE: Body = Body::Cube { half_m: 0.05 };
+
+#[test]
+fn an_object_taken_away_is_gone_within_a_second_and_a_hidden_one_stays() {
+    let mut rng = rng(1);
+    let background = wall(1.5);
+    let place = at(0.0, 0.0, 1.0);
+    for hidden in [false, true] {
+        let mut map = patient_map();
+        let mut frame_index = 0;
+        for _ in 0..30 {
+            let cube = view(CUBE, place, Vec3::ZERO, 3000, 0.002, &mut rng);
+            let report = map.integrate(&frame(frame_index, vec![cube], &background));
+            assert!(report.removed.is_empty(), "removed while in view");
+            frame_index += 1;
+        }
+        assert_eq!(map.len(), 1);
+        // The cube is taken away (the camera sees the wall through where it was), or a board
+        // comes in front of it (the camera cannot see where it was).
+        let scene = if hidden {
+            wall(0.6)
+        } else {
+            background.clone()
+        };
+        let mut gone_after = None;
+        for k in 1..=30 {
+            let report = map.integrate(&frame(frame_index, vec![], &scene));
+            frame_index += 1;
+            if !report.removed.is_empty() {
+                gone_after = Some(k);
+                break;
+            }
+        }
+        if hidden {
+            assert_eq!(gone_after, None, "a hidden object was carved away");
+            assert_eq!(map.len(), 1);
+        } else {
+            let frames = gone_after.expect("the object taken away is still there after 1 s");
+            eprintln!("taken away: gone after {frames} frames");
+            assert!(map.is_empty());
+        }
+    }
+}
+
+/// A box replaced by a ball in the same place: within a second every fused voxel of whatever
+/// object holds that place lies on the ball, none on the box that is gone.
+#[test]
+fn an_object_replaced_in_place_leaves_nothing_of_itself_behind() {
+    let mut rng = rng(2);
+    let background = wall(1.5);
+    let place = at(0.0, 0.0, 1.0);
+    let mut map = patient_map();
+    for i in 0..30 {
+        let cube = view(CUBE, place, Vec3::ZERO, 3000, 0.002, &mut rng);
+        map.integrate(&frame(i, vec![cube], &background));
+    }
+    let ball_centre = Vec3::new(0.0, 0.0, 1.02);
+    let ball = Body::Sphere { radius_m: 0.035 };
+    for i in 30..60 {
+        let points = view(
+            ball,
+            Affine3A::from_translation(ball_centre),
+            Vec3::ZERO,
+            1500,
+            0.002,
+            &mut rng,
+        );
+        map.integrate(&frame(i, vec![points], &background));
+    }
+    let jobs = map.take_mesh_jobs(FRAME * 60);
+    assert!(!jobs.is_empty(), "nothing to mesh");
+    for job in &jobs {
+        let mut worst = 0.0f32;
+        for (_, m) in job.grid.iter() {
+            let p = job
+                .world_from_object
+                .transform_point3(m.centroid().expect("occupied"));
+            worst = worst.max((p.distance(ball_centre) - 0.035).abs());
+        }
+        eprintln!(
+            "object {}: farthest voxel {:.1} mm off the ball",
+            job.object_id,
+            worst * 1e3
+        );
+        assert!(
+            worst < 0.015,
+            "a voxel {worst} m off the ball: the box was not forgotten"
+        );
+    }
+}
+
+/// A static object watched for 10 s: no voxel holds more than the cap, and the fused weight
+/// stops growing (memory and the history's influence are bounded).
+#[test]
+fn a_voxel_keeps_at_most_its_cap_of_points() {
+    let mut rng = rng(3);
+    let background = wall(1.5);
+    let mut map = patient_map();
+    let cap = map.config().max_cell_points;
+    for i in 0..300 {
+        let cube = view(CUBE, at(0.0, 0.0, 1.0), Vec3::ZERO, 3000, 0.002, &mut rng);
+        map.integrate(&frame(i, vec![cube], &background));
+    }
+    let jobs = map.take_mesh_jobs(FRAME * 300);
+    let heaviest = jobs[0]
+        .grid
+        .iter()
+        .map(|(_, m)| m.count)
+        .fold(0.0f64, f64::max);
+    assert!(
+        heaviest <= f64::from(cap) + 1e-6,
+        "a voxel holds {heaviest} points"
+    );
+    assert!(
+        heaviest > f64::from(cap) - 2.0,
+        "the cap was never reached: {heaviest}"
+    );
+}
