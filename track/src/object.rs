@@ -27,7 +27,7 @@ use std::time::Duration;
 use glam::{Affine3A, IVec3, Quat, Vec3};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
 use tacmesh_reconstruct::moments::PointMoments;
-use tracing::debug;
+use tracing::{debug, info};
 
 use crate::change::ChangeTracker;
 use crate::config::TrackConfig;
@@ -114,6 +114,8 @@ pub struct TrackedObject {
     pub last_meshed: Option<Duration>,
     /// Box of the fused points, object frame (empty: min > max).
     bounds_in_object: (Vec3, Vec3),
+    /// Alignment failures since the last success (a burst of resets is logged once).
+    pub resets_in_a_row: u32,
 }
 
 impl TrackedObject {
@@ -145,6 +147,7 @@ impl TrackedObject {
             meshing_runs: 0,
             last_meshed: None,
             bounds_in_object: (Vec3::INFINITY, Vec3::NEG_INFINITY),
+            resets_in_a_row: 0,
         };
         object.restart(Quat::IDENTITY, centroid_in_world, capture_time, config);
         object.fuse(
@@ -185,6 +188,14 @@ impl TrackedObject {
         let aligned = self.align(&sample, centroid_in_world, predicted, config, scratch);
         let outcome = match aligned {
             Ok(object_from_world) => {
+                if self.resets_in_a_row > 1 {
+                    info!(
+                        id = self.id,
+                        resets = self.resets_in_a_row,
+                        "object aligned again after a burst of resets"
+                    );
+                }
+                self.resets_in_a_row = 0;
                 let estimate = object_from_world.inverse();
                 let delta = self.object_from_world * estimate;
                 let shift_m = Vec3::from(delta.translation).length();
@@ -205,6 +216,7 @@ impl TrackedObject {
                 }
             }
             Err(failure) => {
+                self.resets_in_a_row = self.resets_in_a_row.saturating_add(1);
                 let rotation = Quat::from_mat3a(&self.world_from_object.matrix3);
                 self.restart(rotation, centroid_in_world, capture_time, config);
                 Observed::Reset(failure)

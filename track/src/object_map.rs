@@ -219,7 +219,18 @@ impl ObjectMap {
                 Observed::Still => {}
                 Observed::Moved(world_from_object) => report.moved.push((id, world_from_object)),
                 Observed::Reset(why) => {
-                    info!(id, %why, "object reset: its fused state restarts from this frame");
+                    // Once per burst: an object that cannot be aligned fails frame after
+                    // frame (120 lines a second on the ONI recording before this).
+                    if object.resets_in_a_row == 1 {
+                        info!(
+                            id,
+                            %why,
+                            "object reset: its fused state restarts from this frame (logged \
+                             once per burst)"
+                        );
+                    } else {
+                        debug!(id, %why, resets = object.resets_in_a_row, "object reset again");
+                    }
                     report.reset.push(id);
                 }
             }
