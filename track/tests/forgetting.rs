@@ -1,6 +1,8 @@
 //! The fused state forgets: what the camera now sees through is carved away, and no voxel
 //! keeps more than its cap of past points.
 
+// The helpers are shared with tracking.rs; this file uses some of them.
+#[allow(dead_code)]
 mod util;
 
 use std::time::Duration;
