@@ -219,13 +219,13 @@ impl Perception {
                 board.remove(id, &shared.publisher);
             }
             for &id in &report.created {
-                if let Some(object) = self.objects.objects().find(|o| o.id == id) {
-                    board.create(id, object.world_from_object);
+                if let Some(pose) = self.objects.world_from_object(id) {
+                    board.create(id, pose);
                 }
             }
             for &id in &report.reset {
-                if let Some(object) = self.objects.objects().find(|o| o.id == id) {
-                    board.reframe(id, object.world_from_object);
+                if let Some(pose) = self.objects.world_from_object(id) {
+                    board.reframe(id, pose);
                 }
             }
             for &id in &report.removed {

@@ -68,20 +68,18 @@ impl FreeSpace {
     /// points behind the sensor are skipped.
     pub fn from_points(points_in_world: &[Vec3], world_from_sensor: Affine3A) -> Self {
         let sensor_from_world = world_from_sensor.inverse();
-        let tangents = |p: &Vec3| {
-            let s = sensor_from_world.transform_point3(*p);
-            (s.is_finite() && s.z > 1e-3).then(|| (s.x / s.z, s.y / s.z, s.z))
-        };
+        // Projected once: the first pass sizes the image, the second fills it.
+        let projected: Vec<(f32, f32, f32)> = points_in_world
+            .iter()
+            .filter_map(|&p| project(&sensor_from_world, p))
+            .filter(|&(tx, ty, _)| tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN)
+            .collect();
         let (mut lo, mut hi) = ((MAX_TAN, MAX_TAN), (-MAX_TAN, -MAX_TAN));
-        let mut any = false;
-        for (tx, ty, _) in points_in_world.iter().filter_map(tangents) {
-            if tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN {
-                lo = (lo.0.min(tx), lo.1.min(ty));
-                hi = (hi.0.max(tx), hi.1.max(ty));
-                any = true;
-            }
+        for &(tx, ty, _) in &projected {
+            lo = (lo.0.min(tx), lo.1.min(ty));
+            hi = (hi.0.max(tx), hi.1.max(ty));
         }
-        if !any {
+        if projected.is_empty() {
             return Self {
                 sensor_from_world,
                 bins_per_tan: 1.0,
@@ -107,7 +105,7 @@ impl FreeSpace {
             height,
             nearest_m: vec![f32::INFINITY; width * height],
         };
-        for (tx, ty, z) in points_in_world.iter().filter_map(tangents) {
+        for (tx, ty, z) in projected {
             if let Some(bin) = image.bin(tx, ty) {
                 let nearest = &mut image.nearest_m[bin];
                 *nearest = nearest.min(z);
@@ -132,14 +130,13 @@ impl FreeSpace {
     /// lies farther than `p`'s depth plus `margin` at that depth. `false` where nothing was
     /// measured (no return, outside the view, behind the sensor).
     pub fn seen_through(&self, p_in_world: Vec3, margin: &DepthMargin) -> bool {
-        let s = self.sensor_from_world.transform_point3(p_in_world);
-        if !(s.is_finite() && s.z > 1e-3) {
+        let Some((tx, ty, z)) = project(&self.sensor_from_world, p_in_world) else {
             return false;
-        }
-        match self.bin(s.x / s.z, s.y / s.z) {
+        };
+        match self.bin(tx, ty) {
             Some(bin) => {
                 let nearest = self.nearest_m[bin];
-                nearest.is_finite() && nearest > s.z + margin.at(s.z)
+                nearest.is_finite() && nearest > z + margin.at(z)
             }
             None => false,
         }
@@ -149,6 +146,13 @@ impl FreeSpace {
     pub fn measured_bins(&self) -> usize {
         self.nearest_m.iter().filter(|d| d.is_finite()).count()
     }
+}
+
+/// A world point's direction from the sensor as tangents of the optical axis, and its depth
+/// along it; `None` for a non-finite point or one behind (or at) the sensor.
+fn project(sensor_from_world: &Affine3A, p_in_world: Vec3) -> Option<(f32, f32, f32)> {
+    let s = sensor_from_world.transform_point3(p_in_world);
+    (s.is_finite() && s.z > 1e-3).then(|| (s.x / s.z, s.y / s.z, s.z))
 }
 
 #[cfg(test)]

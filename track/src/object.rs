@@ -46,6 +46,15 @@ const CENTROID_SMOOTHING: f32 = 0.1;
 /// Lines of sight this far apart see different sides of an object (45°).
 const ANOTHER_SIDE_RAD: f32 = std::f32::consts::FRAC_PI_4;
 
+/// What [`TrackedObject::carve`] did to the fused state.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Carved {
+    /// Voxels the frame saw through, which lost weight.
+    pub weakened: usize,
+    /// Of those, voxels left with less than a point's weight, now dropped.
+    pub dropped: usize,
+}
+
 /// Rigid velocity in the object's own frame, about its origin.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct BodyVelocity {
@@ -401,14 +410,13 @@ impl TrackedObject {
     /// accounting and the fused box); returns how many were finite and added.
     ///
     /// A voxel holding `max_cell_points` first forgets one point's worth of its weight (its
-    /// moments scaled down to `max_cell_points − 1`, which keeps their plane): a running average over about
-    /// that many of its newest points. The fused state thus follows the recent data, and
+    /// moments scaled down to `max_cell_points − 1`, which keeps their plane): a running
+    /// average over about that many of its newest points. The fused state thus follows the recent data, and
     /// camera jitter or slow drift cannot pile up in it for ever (nvblox caps and decays
     /// weights for the same reason).
     fn add_points(&mut self, points_in_world: &[Vec3], config: &TrackConfig) -> u64 {
         let mut added = 0;
         let cap = f64::from(config.max_cell_points);
-        let factor = self.coarse_factor();
         for &p_in_world in points_in_world {
             let p_in_object = self.object_from_world.transform_point3(p_in_world);
             if !p_in_object.is_finite() {
@@ -417,9 +425,7 @@ impl TrackedObject {
             let cell = self.grid.cell_of(p_in_object);
             if let Some(full) = self.grid.get(cell).filter(|m| m.count > cap - 1.0) {
                 let oldest = full.scaled(1.0 - (cap - 1.0) / full.count);
-                self.grid.subtract(cell, &oldest, 0.0);
-                self.coarse
-                    .subtract(cell.div_euclid(IVec3::splat(factor)), &oldest, 0.0);
+                self.forget(cell, &oldest, 0.0);
             }
             if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
                 let count = moments.count as u32;
@@ -434,20 +440,30 @@ impl TrackedObject {
         added
     }
 
-    /// The coarse grid's voxel in fused voxels.
-    fn coarse_factor(&self) -> i32 {
-        (self.coarse.voxel_size_m() / self.grid.voxel_size_m()).round() as i32
+    /// Takes `share` (a scaled copy of the voxel's moments) out of fused voxel `cell` and
+    /// out of the coarse voxel holding it, so both grids keep the same points; the fused
+    /// voxel is dropped below `min_count` points (the coarse one below half that: its
+    /// emptiness follows its finer voxels, and rounding can leave a speck of weight behind).
+    /// Returns whether the fused voxel is gone.
+    fn forget(&mut self, cell: IVec3, share: &PointMoments, min_count: f64) -> bool {
+        let factor = (self.coarse.voxel_size_m() / self.grid.voxel_size_m()).round() as i32;
+        self.coarse.subtract(
+            cell.div_euclid(IVec3::splat(factor)),
+            share,
+            0.5 * min_count,
+        );
+        self.grid.subtract(cell, share, min_count)
     }
 
     /// Forgets what the frame saw through (see `crate::free_space`): each fused voxel whose
     /// centroid the sensor now sees past loses `carve_fraction` of its weight, and is dropped
     /// once it weighs less than one point. A removed or replaced object is thus erased within
     /// a few frames (at 0.3, a voxel of 256 points is gone in 16 frames, half a second at 30
-    /// fps), and a voxel that one noisy frame contradicts loses little. Returns the voxels
-    /// dropped.
-    pub fn carve(&mut self, free: &FreeSpace, config: &TrackConfig) -> usize {
+    /// fps), and a voxel that one noisy frame contradicts loses little.
+    pub fn carve(&mut self, free: &FreeSpace, config: &TrackConfig) -> Carved {
+        let mut carved = Carved::default();
         if config.carve_fraction <= 0.0 {
-            return 0;
+            return carved;
         }
         let margin = DepthMargin {
             margin_m: config.carve_margin_m,
@@ -462,25 +478,19 @@ impl TrackedObject {
                     .then_some((cell, *m))
             })
             .collect();
-        let factor = self.coarse_factor();
-        let mut dropped = 0;
+        carved.weakened = seen_through.len();
         for (cell, moments) in seen_through {
-            let forget = if moments.count * (1.0 - f64::from(config.carve_fraction)) < 1.0 {
+            let share = if moments.count * (1.0 - f64::from(config.carve_fraction)) < 1.0 {
                 moments
             } else {
                 moments.scaled(f64::from(config.carve_fraction))
             };
-            let gone = self.grid.subtract(cell, &forget, 1.0);
-            // The coarse voxel loses the same share; its own emptiness follows its finer
-            // voxels (rounding can leave a speck of weight behind).
-            self.coarse
-                .subtract(cell.div_euclid(IVec3::splat(factor)), &forget, 0.5);
-            if gone {
+            if self.forget(cell, &share, 1.0) {
                 self.change.note_removed(cell);
-                dropped += 1;
+                carved.dropped += 1;
             }
         }
-        if dropped > 0 {
+        if carved.dropped > 0 {
             self.bounds_in_object = self
                 .grid
                 .iter()
@@ -489,7 +499,7 @@ impl TrackedObject {
                     (lo.min(c), hi.max(c))
                 });
         }
-        dropped
+        carved
     }
 
     /// The points' worth of weight the fused state holds.

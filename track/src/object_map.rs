@@ -315,8 +315,12 @@ impl ObjectMap {
         if let Some(free) = &frame.free_space {
             let mut vanished = Vec::new();
             for object in self.objects.values_mut() {
-                report.carved_cells += object.carve(free, &self.config);
-                if object.fused_weight() < self.config.min_cluster_points as f64 {
+                let carved = object.carve(free, &self.config);
+                report.carved_cells += carved.dropped;
+                // Only carving lowers the weight: an object it left alone keeps what it had.
+                if carved.weakened > 0
+                    && object.fused_weight() < self.config.min_cluster_points as f64
+                {
                     vanished.push(object.id);
                 }
             }
@@ -430,6 +434,11 @@ impl ObjectMap {
             newest_capture: object.last_seen,
             end_of_stream,
         }
+    }
+
+    /// The object's `world_from_object`, if it is tracked.
+    pub fn world_from_object(&self, id: u64) -> Option<Affine3A> {
+        self.objects.get(&id).map(|o| o.world_from_object)
     }
 
     /// Every object, by id.
