@@ -59,6 +59,29 @@ impl MomentGrid {
         Some((cell, moments))
     }
 
+    /// As [`Self::add_point`], into a voxel that keeps at most `cap` points: a full voxel
+    /// first has its moments scaled down to `cap − 1` points (which keeps their plane), in the
+    /// same look-up. Also returns the share forgotten (zero when the voxel was not full), for
+    /// a coarser grid of the same points to [`Self::subtract`].
+    pub fn add_point_capped(
+        &mut self,
+        p: Vec3,
+        cap: f64,
+    ) -> Option<(IVec3, &PointMoments, PointMoments)> {
+        if !p.is_finite() {
+            return None;
+        }
+        let cell = self.cell_of(p);
+        let moments = self.cells.entry(cell).or_default();
+        let mut forgotten = PointMoments::default();
+        if moments.count > cap - 1.0 {
+            forgotten = moments.scaled(1.0 - (cap - 1.0) / moments.count);
+            *moments -= &forgotten;
+        }
+        moments.add_point(p);
+        Some((cell, moments, forgotten))
+    }
+
     /// Takes `part` (moments that were added to `cell` before: a share of its points) out of
     /// `cell`, and empties the voxel when what is left weighs less than `min_count` points.
     /// Returns whether the voxel is gone. For forgetting (see `tacmesh_track`), where the
@@ -110,6 +133,17 @@ impl MomentGrid {
             }
         }
         coarse
+    }
+
+    /// Whether any voxel within `radius` voxels (a cube) of `cell` holds points: the
+    /// occupancy question without summing moments, stopping at the first voxel found.
+    pub fn any_near(&self, cell: IVec3, radius: i32) -> bool {
+        (-radius..=radius).any(|dz| {
+            (-radius..=radius).any(|dy| {
+                (-radius..=radius)
+                    .any(|dx| self.cells.contains_key(&(cell + IVec3::new(dx, dy, dz))))
+            })
+        })
     }
 
     /// Sum of the moments of the voxels within `radius` voxels (a cube) of `cell`.
@@ -171,6 +205,22 @@ mod tests {
     }
 
     #[test]
+    fn a_capped_voxel_averages_its_newest_points() {
+        let mut grid = MomentGrid::new(1.0);
+        for _ in 0..10 {
+            let (_, _, forgotten) = grid.add_point_capped(Vec3::splat(0.25), 4.0).unwrap();
+            assert!(forgotten.count <= 1.0 + 1e-12);
+        }
+        let (_, m, forgotten) = grid.add_point_capped(Vec3::splat(0.75), 4.0).unwrap();
+        assert!((m.count - 4.0).abs() < 1e-12, "{}", m.count);
+        assert!((forgotten.count - 1.0).abs() < 1e-12);
+        // Three points' worth at 0.25 and the newest at 0.75.
+        let centroid = m.centroid().unwrap();
+        assert!(centroid.distance(Vec3::splat(0.375)) < 1e-6, "{centroid}");
+        assert!(grid.add_point_capped(Vec3::NAN, 4.0).is_none());
+    }
+
+    #[test]
     fn coarsening_keeps_every_point() {
         let mut grid = MomentGrid::new(0.1);
         grid.integrate(&[Vec3::splat(0.05), Vec3::splat(0.15), Vec3::splat(-0.05)]);
@@ -184,5 +234,9 @@ mod tests {
         let mut grid = MomentGrid::new(1.0);
         grid.integrate(&[Vec3::splat(0.5), Vec3::splat(1.5), Vec3::splat(3.5)]);
         assert_eq!(grid.neighbourhood(IVec3::ZERO, 1).count, 2.0);
+        assert!(grid.any_near(IVec3::ZERO, 1));
+        assert!(grid.any_near(IVec3::splat(4), 1));
+        assert!(!grid.any_near(IVec3::splat(-2), 1));
+        assert!(!grid.any_near(IVec3::new(6, 0, 0), 1));
     }
 }

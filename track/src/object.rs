@@ -347,7 +347,7 @@ impl TrackedObject {
                 let cell = self
                     .grid
                     .cell_of(self.object_from_world.transform_point3(p));
-                self.grid.neighbourhood(cell, 1).count > 0.0
+                self.grid.any_near(cell, 1)
             })
             .count();
         covered as f32 / points_in_world.len() as f32
@@ -409,8 +409,8 @@ impl TrackedObject {
     /// Adds world points to the fused grids at the current pose (with their change
     /// accounting and the fused box); returns how many were finite and added.
     ///
-    /// A voxel holding `max_cell_points` first forgets one point's worth of its weight (its
-    /// moments scaled down to `max_cell_points − 1`, which keeps their plane): a running
+    /// A voxel holding `max_cell_points` first forgets one point's worth of its weight
+    /// ([`MomentGrid::add_point_capped`]; the coarse grid loses the same share): a running
     /// average over about that many of its newest points. The fused state thus follows the recent data, and
     /// camera jitter or slow drift cannot pile up in it for ever (nvblox caps and decays
     /// weights for the same reason).
@@ -419,17 +419,13 @@ impl TrackedObject {
         let cap = f64::from(config.max_cell_points);
         for &p_in_world in points_in_world {
             let p_in_object = self.object_from_world.transform_point3(p_in_world);
-            if !p_in_object.is_finite() {
-                continue;
-            }
-            let cell = self.grid.cell_of(p_in_object);
-            if let Some(full) = self.grid.get(cell).filter(|m| m.count > cap - 1.0) {
-                let oldest = full.scaled(1.0 - (cap - 1.0) / full.count);
-                self.forget(cell, &oldest, 0.0);
-            }
-            if let Some((cell, moments)) = self.grid.add_point(p_in_object) {
+            if let Some((cell, moments, forgotten)) = self.grid.add_point_capped(p_in_object, cap) {
                 let count = moments.count as u32;
                 self.change.note_point(&self.grid, cell, count);
+                if forgotten.count > 0.0 {
+                    self.coarse
+                        .subtract(self.coarse_cell(cell), &forgotten, 0.0);
+                }
                 self.coarse.add_point(p_in_object);
                 self.points_fused += 1;
                 self.bounds_in_object.0 = self.bounds_in_object.0.min(p_in_object);
@@ -446,13 +442,15 @@ impl TrackedObject {
     /// emptiness follows its finer voxels, and rounding can leave a speck of weight behind).
     /// Returns whether the fused voxel is gone.
     fn forget(&mut self, cell: IVec3, share: &PointMoments, min_count: f64) -> bool {
-        let factor = (self.coarse.voxel_size_m() / self.grid.voxel_size_m()).round() as i32;
-        self.coarse.subtract(
-            cell.div_euclid(IVec3::splat(factor)),
-            share,
-            0.5 * min_count,
-        );
+        self.coarse
+            .subtract(self.coarse_cell(cell), share, 0.5 * min_count);
         self.grid.subtract(cell, share, min_count)
+    }
+
+    /// The coarse voxel holding fused voxel `cell` (the grids share their origin).
+    fn coarse_cell(&self, cell: IVec3) -> IVec3 {
+        let factor = (self.coarse.voxel_size_m() / self.grid.voxel_size_m()).round() as i32;
+        cell.div_euclid(IVec3::splat(factor))
     }
 
     /// Forgets what the frame saw through (see `crate::free_space`): each fused voxel whose
