@@ -4,7 +4,9 @@
 //! - `eval`: mean Hausdorff error of a mesh against ground truth ([`eval`]).
 //! - `sim`: the paper's shapes and noisy samples of them ([`sim`]).
 //! - `run`: the daemon ([`run`]); `subscribe`: a client of it ([`subscribe`]).
+//! - `capture`: a sensor's frames as world-frame point clouds ([`capture`]).
 
+mod capture;
 mod eval;
 mod mesh;
 mod run;
@@ -40,6 +42,7 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     Run(run::RunArgs),
+    Capture(capture::CaptureArgs),
     Subscribe(subscribe::SubscribeArgs),
     Mesh(mesh::MeshArgs),
     Eval(eval::EvalArgs),
@@ -141,6 +144,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
     match cli.command {
         Command::Run(args) => run::run(args, cli.verbose),
+        Command::Capture(args) => capture::run(args),
         Command::Subscribe(args) => subscribe::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Eval(args) => eval::run(args),
