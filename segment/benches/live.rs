@@ -40,21 +40,15 @@ fn time(points: &[Vec3], config: &SegmentConfig, with_hints: bool) -> StageTimes
     }
 }
 
-fn report(scene: &str, points: &[Vec3], viewpoint_m: Vec3) {
+fn report(scene: &str, points: &[Vec3], world_from_sensor: glam::Affine3A) {
     let finite = points.iter().filter(|p| p.is_finite()).count();
     println!("{scene}: {finite} finite points");
     println!(
         "  {:<22} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6}",
         "config", "planes", "classify", "voxels", "creases", "clusters", "total", "ratio"
     );
-    let exact = SegmentConfig {
-        viewpoint_m,
-        ..SegmentConfig::default()
-    };
-    let live = SegmentConfig {
-        viewpoint_m,
-        ..SegmentConfig::live()
-    };
+    let exact = SegmentConfig::default().seen_from(world_from_sensor);
+    let live = SegmentConfig::live().seen_from(world_from_sensor);
     let mut baseline = None;
     for (name, config, with_hints) in [
         ("default", &exact, false),
@@ -89,7 +83,7 @@ fn main() {
         report(
             "simulated tabletop 640x480",
             &frame.points_in_world,
-            frame.sensor_in_world,
+            frame.world_from_sensor,
         );
         // The daemon's path: the organised frame, every 2nd pixel in each direction.
         let camera = tacmesh_sim::SimulatedDepthCamera::tabletop(7);
@@ -109,12 +103,12 @@ fn main() {
         report(
             "simulated tabletop, every 2nd pixel (the daemon's path)",
             &strided,
-            frame.sensor_in_world,
+            frame.world_from_sensor,
         );
         for name in ["mosd/osd_test0.pcd", "mosd/osd_test35.pcd"] {
             let path = tacmesh_testdata::path(&format!("pointclouds/{name}"));
             match tacmesh_formats::pcd::read_pcd(&path) {
-                Ok(cloud) => report(name, &cloud.points, Vec3::ZERO),
+                Ok(cloud) => report(name, &cloud.points, glam::Affine3A::IDENTITY),
                 Err(err) => println!("{name}: skipped ({err})"),
             }
         }

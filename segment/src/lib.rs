@@ -33,6 +33,8 @@ mod clusters;
 mod creases;
 pub mod grid;
 mod planes;
+mod range;
+mod scene;
 mod voxels;
 
 use std::time::{Duration, Instant};
@@ -55,13 +57,17 @@ pub struct SegmentConfig {
     /// Points above a plane by up to this many metres (beyond `plane_distance_m`) also go with
     /// the plane rather than with objects: the noisy fringe of the table. Default 0.015.
     pub plane_margin_m: f32,
-    /// At most this many planes are removed. Default 1 (the table, or the floor).
+    /// At most this many planes are searched for (supports, walls and large object faces; see
+    /// the `scene` module). Default 6: a floor, a table, two or three walls, a ceiling.
     pub max_planes: usize,
-    /// A plane must hold at least this fraction of the finite points. Default 0.1.
+    /// A plane must hold at least this fraction of the finite points. Default 0.03: a wall
+    /// seen at a slant at 3 m holds 5–10 % of a Kinect frame.
     pub min_plane_fraction: f32,
     /// Points closer than this, in metres, belong to the same object (unless a concave crease
     /// separates them, see `max_valley_depth_m`). Default 0.015: about five Kinect pixel
-    /// footprints at 1.5 m, enough to bridge the depth steps of a 0.5–2 m scan.
+    /// footprints at 1.5 m, enough to bridge the depth steps of a 0.5–2 m scan. Farther away it
+    /// grows to 1.5 depth steps (`range_step_per_m2`), so that one depth level of a far
+    /// surface links to the next.
     pub cluster_tolerance_m: f32,
     /// Radius of the neighbourhood a point's local plane is fitted to (for the valley depth), in
     /// metres; zero turns the crease test off. Default 0.025.
@@ -76,6 +82,30 @@ pub struct SegmentConfig {
     pub min_cluster_points: usize,
     /// Larger clusters are background (walls, furniture) and are dropped. Default 100 000.
     pub max_cluster_points: usize,
+    /// The depth sensor's depth step per square metre of depth, in metres: a structured-light or
+    /// stereo camera's disparity step grows with z² (see the `range` module). Plane bands widen
+    /// to ¾ of a step and cluster links to 1.5 steps where that is more than their fixed
+    /// distances, and a cluster no deeper than one step is a slice, not an object. Default
+    /// 0.0035, a Kinect v1 / Xtion / RealSense D4xx class sensor (the PrimeSense recording's
+    /// wall steps are 40–45 mm at 3.3–3.9 m); 0 for a fixed resolution (a simulated or lidar
+    /// scan).
+    pub range_step_per_m2: f32,
+    /// Up, in the points' frame (a unit vector): supports face it. Default −y, up in a camera's
+    /// optical frame (x right, y down, z forward) held upright.
+    pub up: Vec3,
+    /// The sensor's optical axis in the points' frame (a unit vector), along which depth is
+    /// measured. Default +z (the optical frame).
+    pub forward: Vec3,
+    /// A plane facing up within this angle of `up`, in degrees, can be a support. Default 60: a
+    /// camera held upright looks down on a table by up to 50°, and walls are 80–100° from up.
+    pub max_support_tilt_deg: f32,
+    /// A plane facing up must be at least this large across to be a support, in metres;
+    /// smaller ones are the tops of objects. Default 0.5.
+    pub min_support_size_m: f32,
+    /// The largest object, in metres (twice the farthest distance of a cluster's points from
+    /// its centroid); larger clusters, and planes facing sideways or down that are larger, are
+    /// background. Default 1.2, a chair.
+    pub max_object_size_m: f32,
     /// The sensor position in the points' frame, in metres; plane normals are turned towards
     /// it. Default the origin (points in the sensor frame).
     pub viewpoint_m: Vec3,
@@ -97,13 +127,19 @@ impl Default for SegmentConfig {
         Self {
             plane_distance_m: 0.012,
             plane_margin_m: 0.015,
-            max_planes: 1,
-            min_plane_fraction: 0.1,
+            max_planes: 6,
+            min_plane_fraction: 0.03,
             cluster_tolerance_m: 0.015,
             crease_radius_m: 0.025,
             max_valley_depth_m: 0.001,
             min_cluster_points: 300,
             max_cluster_points: 100_000,
+            range_step_per_m2: 0.0035,
+            up: Vec3::NEG_Y,
+            forward: Vec3::Z,
+            max_support_tilt_deg: 60.0,
+            min_support_size_m: 0.5,
+            max_object_size_m: 1.2,
             viewpoint_m: Vec3::ZERO,
             seed: 0,
             plane_sample_points: usize::MAX,
@@ -119,9 +155,10 @@ impl SegmentConfig {
     /// 12 + 15 mm) so that low objects keep their bottoms (the simulated tabletop's torus is
     /// 4 cm tall). On the mOSD scans this scores better than the defaults (see
     /// `tests/real_data.rs`); 7–8 mm voxels were as good as 5 mm there, 5 mm cost 3× more
-    /// in the crease test. Set `viewpoint_m` to the sensor position when segmenting
-    /// world-frame points, and pass the previous frame's planes to [`segment_with_hints`],
-    /// which skips RANSAC (`cargo bench -p tacmesh-segment` prints the stage times).
+    /// in the crease test. For world-frame points, place the sensor with
+    /// [`SegmentConfig::seen_from`], and pass the previous frame's planes
+    /// ([`Segmentation::plane_hints`]) to [`segment_with_hints`], which skips RANSAC
+    /// (`cargo bench -p tacmesh-segment` prints the stage times).
     pub fn live() -> Self {
         Self {
             plane_distance_m: 0.008,
@@ -133,16 +170,64 @@ impl SegmentConfig {
     }
 }
 
+impl SegmentConfig {
+    /// These settings for points in a world frame where the sensor is at `world_from_sensor`
+    /// (an optical frame: x right, y down, z forward): the viewpoint is the sensor's position,
+    /// forward its optical axis, and up its −y axis (a camera held upright, see
+    /// [`SegmentConfig::max_support_tilt_deg`]). to a plane (and within [`SegmentConfig::plane_margin_m`] more above
+    /// a support) is on it: [`SegmentConfig::plane_distance_m`], widened far away to ¾ of a
+    /// depth step ([`SegmentConfig::range_step_per_m2`]).
+    pub fn plane_distance_at(&self, p: Vec3) -> f32 {
+        plane_band(self).at(p)
+    }
+
+    pub fn seen_from(self, world_from_sensor: glam::Affine3A) -> Self {
+        Self {
+            viewpoint_m: Vec3::from(world_from_sensor.translation),
+            up: world_from_sensor
+                .transform_vector3(Vec3::NEG_Y)
+                .normalize_or_zero(),
+            forward: world_from_sensor
+                .transform_vector3(Vec3::Z)
+                .normalize_or_zero(),
+            ..self
+        }
+    }
+}
+
 /// The result of [`segment`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Segmentation {
     /// Support planes, largest first; each lists its points (RANSAC inliers plus the margin).
     pub planes: Vec<SupportPlane>,
+    /// Background planes (walls, ceilings), each with the points dropped as on it.
+    pub background: Vec<SupportPlane>,
+    /// Planes found on objects (a box's side): their points stay with the objects, and the
+    /// plane is only kept as a hint for the next frame (no inliers listed).
+    pub object_faces: Vec<SupportPlane>,
+    /// Clusters dropped as background (too large, or one depth step deep).
+    pub background_clusters: usize,
     /// Point indices of each object (ascending), largest object first.
     pub objects: Vec<Vec<u32>>,
     /// One label per input point: `k` (1-based) for points of `objects[k - 1]`, 0 for plane
     /// points, unassigned points and non-finite points.
     pub labels: Vec<u32>,
+}
+
+impl Segmentation {
+    /// Every plane found (supports, background planes, object faces), without their inliers:
+    /// the hints for the next frame ([`segment_with_hints`]).
+    pub fn plane_hints(&self) -> Vec<SupportPlane> {
+        self.planes
+            .iter()
+            .chain(&self.background)
+            .chain(&self.object_faces)
+            .map(|plane| SupportPlane {
+                inliers: Vec::new(),
+                ..plane.clone()
+            })
+            .collect()
+    }
 }
 
 /// How long each stage of one [`segment_timed`] call took (wall-clock), for per-frame logs and
@@ -216,20 +301,32 @@ pub fn segment_timed(
     let min_plane_points =
         (config.min_plane_fraction.max(0.0) as f64 * plane_sample.len() as f64).ceil();
     let hints: Vec<(Vec3, f32)> = hints.iter().map(|h| (h.normal, h.offset_m)).collect();
-    let mut planes = planes::find_planes(
+    let band = plane_band(config);
+    let found = planes::find_planes(
         points,
         &plane_sample,
-        config.plane_distance_m.max(0.0),
+        &band,
         config.max_planes,
         min_plane_points.min(usize::MAX as f64) as usize,
-        config.viewpoint_m,
         config.seed,
         &hints,
     );
+    let (mut planes, mut background, mut object_faces) = (Vec::new(), Vec::new(), Vec::new());
+    let roles = scene::plane_roles(&found, &band, config);
+    for (plane, role) in found.into_iter().zip(roles) {
+        match role {
+            scene::PlaneRole::Support => planes.push(plane),
+            scene::PlaneRole::Background => background.push(plane),
+            scene::PlaneRole::ObjectFace => object_faces.push(SupportPlane {
+                inliers: Vec::new(),
+                ..plane
+            }),
+        }
+    }
     times.planes = clock.elapsed();
 
     let clock = Instant::now();
-    let candidates = classify(points, &finite, &mut planes, config);
+    let candidates = classify(points, &finite, &mut planes, &mut background, config);
     times.classify = clock.elapsed();
 
     let objects = if config.voxel_size_m > 0.0 && config.voxel_size_m.is_finite() {
@@ -275,7 +372,14 @@ pub fn segment_timed(
     };
 
     let clock = Instant::now();
-    let mut objects = objects;
+    let before = objects.len();
+    let mut objects: Vec<Vec<u32>> = objects
+        .into_iter()
+        .filter(|object| {
+            scene::background_cluster(points, object, &background, &band, config).is_none()
+        })
+        .collect();
+    let background_clusters = before - objects.len();
     objects.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
     let mut labels = vec![0u32; points.len()];
     for (k, object) in objects.iter().enumerate() {
@@ -286,45 +390,87 @@ pub fn segment_timed(
     times.clusters += clock.elapsed();
     let segmentation = Segmentation {
         planes,
+        background,
+        object_faces,
+        background_clusters,
         objects,
         labels,
     };
     (segmentation, times)
 }
 
-/// Stage 2: assigns each finite point to the first plane it lies within `plane_distance_m` of
+/// The inlier distance of a plane at a point's range: the configured distance, or ¾ of a depth
+/// step far away, where a slanted surface is a staircase of steps.
+fn plane_band(config: &SegmentConfig) -> range::RangeDistance {
+    range::RangeDistance::new(
+        config.plane_distance_m,
+        config.range_step_per_m2,
+        0.75,
+        config.viewpoint_m,
+    )
+}
+
+/// The linking distance of clustering at a point's range (see [`SegmentConfig::cluster_tolerance_m`]).
+fn cluster_reach(config: &SegmentConfig) -> range::RangeDistance {
+    range::RangeDistance::new(
+        config.cluster_tolerance_m,
+        config.range_step_per_m2,
+        1.5,
+        config.viewpoint_m,
+    )
+}
+
+/// Stage 2: assigns each finite point to the first support it lies within its band of
 /// (replacing the planes' inliers, which may have come from a sample), then the fringe up to
-/// `plane_margin_m` above a plane to that plane, drops points below a plane, and returns the
-/// rest (ascending): the object candidates.
+/// `plane_margin_m` above a support to that support; drops points on a background plane, and
+/// points below the lowest support (the floor, or the table when no floor is seen: nothing is
+/// seen through it); and returns the rest (ascending): the object candidates. Points below a
+/// raised support stay candidates (a chair beside the table, a box under it).
 fn classify(
     points: &[Vec3],
     finite: &[u32],
     planes: &mut [SupportPlane],
+    background: &mut [SupportPlane],
     config: &SegmentConfig,
 ) -> Vec<u32> {
-    let threshold_m = config.plane_distance_m.max(0.0);
-    let below_m = -threshold_m;
-    let above_m = threshold_m + config.plane_margin_m.max(0.0);
-    if planes.is_empty() {
+    let band = plane_band(config);
+    let margin_m = config.plane_margin_m.max(0.0);
+    if planes.is_empty() && background.is_empty() {
         return finite.to_vec();
     }
+    // The lowest support is the one the sensor is highest above.
+    let lowest = (0..planes.len()).max_by(|&a, &b| {
+        let height = |k: usize| planes[k].signed_distance_m(config.viewpoint_m);
+        height(a).total_cmp(&height(b))
+    });
     let mut inliers: Vec<Vec<u32>> = planes.iter().map(|_| Vec::new()).collect();
     let mut fringes: Vec<Vec<u32>> = planes.iter().map(|_| Vec::new()).collect();
+    let mut dropped: Vec<Vec<u32>> = background.iter().map(|_| Vec::new()).collect();
     let mut candidates = Vec::with_capacity(finite.len() / 4);
     'points: for &i in finite {
         let p = points[i as usize];
+        let threshold_m = band.at(p);
         for (k, plane) in planes.iter().enumerate() {
             if plane.signed_distance_m(p).abs() <= threshold_m {
                 inliers[k].push(i);
                 continue 'points;
             }
         }
-        for (k, plane) in planes.iter().enumerate() {
-            let d = plane.signed_distance_m(p);
-            if d < below_m {
+        for (k, plane) in background.iter().enumerate() {
+            if plane.signed_distance_m(p).abs() <= threshold_m {
+                dropped[k].push(i);
                 continue 'points;
             }
-            if d <= above_m {
+        }
+        for (k, plane) in planes.iter().enumerate() {
+            let d = plane.signed_distance_m(p);
+            if d < -threshold_m {
+                if Some(k) == lowest {
+                    continue 'points;
+                }
+                continue;
+            }
+            if d <= threshold_m + margin_m {
                 fringes[k].push(i);
                 continue 'points;
             }
@@ -337,6 +483,9 @@ fn classify(
             inliers.sort_unstable();
         }
         plane.inliers = inliers;
+    }
+    for (plane, dropped) in background.iter_mut().zip(dropped) {
+        plane.inliers = dropped;
     }
     candidates
 }
@@ -377,7 +526,7 @@ fn find_objects(
         points,
         &core,
         weights,
-        config.cluster_tolerance_m,
+        &cluster_reach(config),
         config.min_cluster_points.max(1),
         config.max_cluster_points,
     );
@@ -452,6 +601,16 @@ pub fn segment_cloud(cloud: &PointCloud, config: &SegmentConfig) -> Segmentation
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The default settings for these scenes: world z up, the sensor at the origin looking
+    /// down (tables at z = -1).
+    fn z_up() -> SegmentConfig {
+        SegmentConfig {
+            up: Vec3::Z,
+            forward: Vec3::NEG_Z,
+            ..SegmentConfig::default()
+        }
+    }
 
     /// Deterministic jitter in ±`amplitude`.
     fn jitter(k: u32, amplitude: f32) -> f32 {
@@ -535,7 +694,7 @@ mod tests {
     #[test]
     fn segment_finds_table_and_three_objects() {
         let (points, truth) = tabletop();
-        let seg = segment(&points, &SegmentConfig::default());
+        let seg = segment(&points, &z_up());
         assert_eq!(seg.planes.len(), 1);
         let plane = &seg.planes[0];
         assert!(
@@ -658,7 +817,7 @@ mod tests {
             true,
             |_| false,
         ));
-        let seg = segment(&points, &SegmentConfig::default());
+        let seg = segment(&points, &z_up());
         assert_eq!(
             seg.objects.len(),
             2,
@@ -699,7 +858,7 @@ mod tests {
         }
         let config = SegmentConfig {
             min_plane_fraction: 0.3,
-            ..SegmentConfig::default()
+            ..z_up()
         };
         let seg = segment(&points, &config);
         assert!(seg.planes.is_empty());
@@ -710,14 +869,14 @@ mod tests {
 
     #[test]
     fn segment_of_nothing_is_empty() {
-        let seg = segment(&[], &SegmentConfig::default());
+        let seg = segment(&[], &z_up());
         assert!(seg.planes.is_empty() && seg.objects.is_empty() && seg.labels.is_empty());
     }
 
     #[test]
     fn segment_ignores_non_finite_points() {
         let points = vec![Vec3::NAN; 1000];
-        let seg = segment(&points, &SegmentConfig::default());
+        let seg = segment(&points, &z_up());
         assert!(seg.planes.is_empty() && seg.objects.is_empty());
         assert_eq!(seg.labels, vec![0; 1000]);
 
@@ -731,7 +890,7 @@ mod tests {
                 };
             }
         }
-        let seg = segment(&points, &SegmentConfig::default());
+        let seg = segment(&points, &z_up());
         assert_eq!(seg.objects.len(), 3);
         assert!((0..points.len()).step_by(7).all(|k| seg.labels[k] == 0));
     }
@@ -739,10 +898,7 @@ mod tests {
     #[test]
     fn segment_is_deterministic_for_a_seed() {
         let (points, _) = tabletop();
-        let config = SegmentConfig {
-            seed: 42,
-            ..SegmentConfig::default()
-        };
+        let config = SegmentConfig { seed: 42, ..z_up() };
         let a = segment(&points, &config);
         let b = segment(&points, &config);
         assert_eq!(a, b);
@@ -760,7 +916,7 @@ mod tests {
                 -1.3 + jitter(k + 13, 0.05),
             ));
         }
-        let seg = segment(&points, &SegmentConfig::default());
+        let seg = segment(&points, &z_up());
         assert_eq!(seg.objects.len(), 3);
         assert!(seg.labels[n..].iter().all(|&l| l == 0));
         assert!(seg.planes[0].inliers.iter().all(|&i| (i as usize) < n));

@@ -22,6 +22,8 @@ use glam::{DMat3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use tacmesh_reconstruct::moments::smallest_eigenvector;
 
+use crate::range::RangeDistance;
+
 /// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
 /// candidates, the chance that none of `k` samples is all-inlier is `(1 - w³)^k`: for `w = 0.3`
 /// and `k = 400` that is 2e-5.
@@ -41,7 +43,11 @@ pub struct SupportPlane {
     /// Indices (into the input points) of the points assigned to this plane, ascending.
     pub inliers: Vec<u32>,
     /// Convex hull of the inliers projected onto the plane, counter-clockwise about `normal`.
-    outline: Vec<Vec3>,
+    pub(crate) outline: Vec<Vec3>,
+    /// How far the plane's inliers reach across it (see [`SupportPlane::extent_m`]).
+    pub(crate) extent_m: f32,
+    /// See [`SupportPlane::area_m2`].
+    pub(crate) area_m2: f32,
 }
 
 impl SupportPlane {
@@ -56,6 +62,96 @@ impl SupportPlane {
     pub fn outline(&self) -> Vec<Vec3> {
         self.outline.clone()
     }
+
+    /// The plane's size, in metres: how far the largest connected region of its inliers
+    /// reaches along two axes in the plane and their diagonals (the larger). The region is
+    /// made of 4 cm squares holding inliers, joined at edges and corners: the few points
+    /// elsewhere that happen to lie on the same infinite plane, which the outline includes,
+    /// do not count.
+    pub fn extent_m(&self) -> f32 {
+        self.extent_m
+    }
+
+    /// The area of the largest connected region of the plane's inliers (see
+    /// [`SupportPlane::extent_m`]), in square metres. A RANSAC plane that only grazes the tops
+    /// of a few objects has a large outline but a small region; a table or a wall has both.
+    pub fn area_m2(&self) -> f32 {
+        self.area_m2
+    }
+}
+
+/// The side of the squares a plane's extent and area are measured in, in metres.
+const AREA_CELL_M: f32 = 0.04;
+
+/// [`SupportPlane::extent_m`] and [`SupportPlane::area_m2`] of the plane with normal `n`: the
+/// inliers binned into squares of [`AREA_CELL_M`] on the plane, the largest 8-connected region
+/// of squares found by flood fill, and its area and its spread along two axes and their
+/// diagonals.
+fn extent_and_area(points: &[Vec3], inliers: &[u32], n: Vec3) -> (f32, f32) {
+    let (u, v) = plane_basis(n);
+    let mut squares: Vec<(i32, i32)> = inliers
+        .iter()
+        .map(|&i| {
+            let p = points[i as usize];
+            (
+                (u.dot(p) / AREA_CELL_M).floor() as i32,
+                (v.dot(p) / AREA_CELL_M).floor() as i32,
+            )
+        })
+        .collect();
+    squares.sort_unstable();
+    squares.dedup();
+    let mut seen = vec![false; squares.len()];
+    let mut best: Vec<(i32, i32)> = Vec::new();
+    for start in 0..squares.len() {
+        if seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        let mut region = vec![squares[start]];
+        let mut next = 0;
+        while next < region.len() {
+            let (a, b) = region[next];
+            next += 1;
+            for da in -1..=1 {
+                for db in -1..=1 {
+                    if let Ok(k) = squares.binary_search(&(a + da, b + db)) {
+                        if !seen[k] {
+                            seen[k] = true;
+                            region.push(squares[k]);
+                        }
+                    }
+                }
+            }
+        }
+        if region.len() > best.len() {
+            best = region;
+        }
+    }
+    if best.is_empty() {
+        return (0.0, 0.0);
+    }
+    let spread = |f: &dyn Fn((i32, i32)) -> f32| {
+        let (lo, hi) = best
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &q| {
+                (lo.min(f(q)), hi.max(f(q)))
+            });
+        hi - lo
+    };
+    let diagonal = std::f32::consts::FRAC_1_SQRT_2;
+    let extent_cells = [
+        spread(&|(a, _)| a as f32),
+        spread(&|(_, b)| b as f32),
+        spread(&|(a, b)| (a + b) as f32 * diagonal),
+        spread(&|(a, b)| (a - b) as f32 * diagonal),
+    ]
+    .into_iter()
+    .fold(0.0, f32::max);
+    (
+        (extent_cells + 1.0) * AREA_CELL_M,
+        best.len() as f32 * AREA_CELL_M * AREA_CELL_M,
+    )
 }
 
 /// Xorshift64* (Vigna, "An experimental exploration of Marsaglia's xorshift generators", 2016):
@@ -99,13 +195,14 @@ fn hypothesis(a: Vec3, b: Vec3, c: Vec3) -> Option<(Vec3, f32)> {
     Some((n, n.dot(a)))
 }
 
-/// Number of `sample` points within `threshold_m` of the plane. The sample is a contiguous copy
-/// of the points (not indices into them): scoring reads it once per hypothesis, and gathering
-/// through random indices every time cost more than the arithmetic.
-fn score(sample: &[Vec3], (n, d): (Vec3, f32), threshold_m: f32) -> usize {
+/// Number of `sample` points within their inlier distance of the plane. The sample is a
+/// contiguous copy of the points and their distances (not indices into them): scoring reads it
+/// once per hypothesis, and gathering through random indices every time cost more than the
+/// arithmetic.
+fn score(sample: &[(Vec3, f32)], (n, d): (Vec3, f32)) -> usize {
     sample
         .iter()
-        .filter(|&&p| (n.dot(p) - d).abs() <= threshold_m)
+        .filter(|&&(p, threshold_m)| (n.dot(p) - d).abs() <= threshold_m)
         .count()
 }
 
@@ -139,17 +236,20 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
     Some((n.as_vec3(), n.dot(centroid) as f32))
 }
 
-/// Candidates within `threshold_m` of the plane.
+/// Candidates within the inlier distance (at their range) of the plane.
 fn inliers_of(
     points: &[Vec3],
     candidates: &[u32],
     (n, d): (Vec3, f32),
-    threshold_m: f32,
+    band: &RangeDistance,
 ) -> Vec<u32> {
     candidates
         .par_iter()
         .copied()
-        .filter(|&i| (n.dot(points[i as usize]) - d).abs() <= threshold_m)
+        .filter(|&i| {
+            let p = points[i as usize];
+            (n.dot(p) - d).abs() <= band.at(p)
+        })
         .collect()
 }
 
@@ -158,9 +258,9 @@ fn refine(
     points: &[Vec3],
     candidates: &[u32],
     mut plane: (Vec3, f32),
-    threshold_m: f32,
+    band: &RangeDistance,
 ) -> ((Vec3, f32), Vec<u32>) {
-    let mut inliers = inliers_of(points, candidates, plane, threshold_m);
+    let mut inliers = inliers_of(points, candidates, plane, band);
     for _ in 0..3 {
         let Some(fitted) = fit_plane(points, &inliers) else {
             break;
@@ -168,7 +268,7 @@ fn refine(
         // Always take the fit, even if it holds a few points fewer: a hypothesis tilted within
         // the threshold can hold more (the feet of objects) and still be the worse plane.
         plane = fitted;
-        inliers = inliers_of(points, candidates, fitted, threshold_m);
+        inliers = inliers_of(points, candidates, fitted, band);
     }
     (plane, inliers)
 }
@@ -256,35 +356,39 @@ fn outline_on_plane(points: &[Vec3], inliers: &[u32], n: Vec3, d: f32) -> Vec<Ve
         .collect()
 }
 
-/// Finds up to `max_planes` support planes among `candidates` (indices of finite points).
+/// Finds up to `max_planes` planes among `candidates` (indices of finite points).
 ///
-/// Each plane's `inliers` are the candidates within `threshold_m` of it; a plane is accepted
-/// only if it holds at least `min_inliers` points. Normals are turned towards `viewpoint`.
-/// Returns the planes, largest first; inliers of one plane are not candidates for the next.
+/// Each plane's `inliers` are the candidates within `band` of it (at their range); a plane is
+/// accepted only if it holds at least `min_inliers` points. Normals are turned towards the
+/// band's viewpoint. Returns the planes, largest first; inliers of one plane are not
+/// candidates for the next.
 ///
 /// `hints` (e.g. the previous frame's planes) are tried first, in order: a hint whose refined
 /// plane holds at least `min_inliers` points is taken without RANSAC; the others are skipped.
-/// Without hints, or once they are used up, planes come from RANSAC.
-#[allow(clippy::too_many_arguments)] // one per knob of the stage; a struct would only rename them
+/// Without hints, planes come from RANSAC until one is too small. With hints, at most one
+/// RANSAC search follows them: a scene of several planes is found over a few frames, and a
+/// frame does not pay for a search that fails every time (a room has fewer large planes
+/// than `max_planes`).
 pub(crate) fn find_planes(
     points: &[Vec3],
     candidates: &[u32],
-    threshold_m: f32,
+    band: &RangeDistance,
     max_planes: usize,
     min_inliers: usize,
-    viewpoint: Vec3,
     seed: u64,
     hints: &[(Vec3, f32)],
 ) -> Vec<SupportPlane> {
+    let viewpoint = band.viewpoint;
     let mut rng = XorShift::new(seed);
     let mut remaining: Vec<u32> = candidates.to_vec();
     let mut planes = Vec::new();
     let min_inliers = min_inliers.max(3);
+    let mut searches_left = if hints.is_empty() { usize::MAX } else { 1 };
     let mut hints = hints.iter();
     while planes.len() < max_planes && remaining.len() >= min_inliers {
         // A hint that still holds enough points after refinement saves the RANSAC search.
         let hinted = hints.by_ref().find_map(|&hint| {
-            let (plane, inliers) = refine(points, &remaining, hint, threshold_m);
+            let (plane, inliers) = refine(points, &remaining, hint, band);
             (inliers.len() >= min_inliers).then_some((plane, inliers))
         });
         if let Some(((n, d), inliers)) = hinted {
@@ -298,12 +402,21 @@ pub(crate) fn find_planes(
             );
             continue;
         }
-        // A fixed random scoring subset (with replacement; duplicates are harmless).
-        let sample: Vec<Vec3> = if remaining.len() <= SCORE_SAMPLE {
-            remaining.iter().map(|&i| points[i as usize]).collect()
+        if searches_left == 0 {
+            break;
+        }
+        searches_left -= 1;
+        // A fixed random scoring subset (with replacement; duplicates are harmless), each point
+        // with its inlier distance.
+        let with_band = |i: u32| {
+            let p = points[i as usize];
+            (p, band.at(p))
+        };
+        let sample: Vec<(Vec3, f32)> = if remaining.len() <= SCORE_SAMPLE {
+            remaining.iter().map(|&i| with_band(i)).collect()
         } else {
             (0..SCORE_SAMPLE)
-                .map(|_| points[remaining[rng.below(remaining.len())] as usize])
+                .map(|_| with_band(remaining[rng.below(remaining.len())]))
                 .collect()
         };
         // Draw all hypotheses first (sequential, seeded), then score them in parallel.
@@ -317,11 +430,11 @@ pub(crate) fn find_planes(
         let best = hypotheses
             .par_iter()
             .enumerate()
-            .map(|(k, &h)| (score(&sample, h, threshold_m), k))
+            .map(|(k, &h)| (score(&sample, h), k))
             // Ties go to the earliest hypothesis so that the result is deterministic.
             .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
         let Some((_, k)) = best else { break };
-        let (plane, inliers) = refine(points, &remaining, hypotheses[k], threshold_m);
+        let (plane, inliers) = refine(points, &remaining, hypotheses[k], band);
         if inliers.len() < min_inliers {
             break;
         }
@@ -352,12 +465,15 @@ fn push_plane(
         d = -d;
     }
     let outline = outline_on_plane(points, &inliers, n, d);
+    let (extent_m, area_m2) = extent_and_area(points, &inliers, n);
     *remaining = difference(remaining, &inliers);
     planes.push(SupportPlane {
         normal: n,
         offset_m: d,
         inliers,
         outline,
+        extent_m,
+        area_m2,
     });
 }
 

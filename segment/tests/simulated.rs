@@ -12,10 +12,7 @@ use util::{best_ious, tabletop_frame};
 #[test]
 fn live_segmentation_finds_table_and_three_objects() {
     let frame = tabletop_frame(7, 0);
-    let config = SegmentConfig {
-        viewpoint_m: frame.sensor_in_world,
-        ..SegmentConfig::live()
-    };
+    let config = SegmentConfig::live().seen_from(frame.world_from_sensor);
     let seg = segment(&frame.points_in_world, &config);
     assert_eq!(seg.planes.len(), 1);
     let table = &seg.planes[0];
@@ -51,10 +48,7 @@ fn live_segmentation_finds_table_and_three_objects() {
 #[test]
 fn stale_hint_falls_back_to_ransac() {
     let frame = tabletop_frame(3, 0);
-    let config = SegmentConfig {
-        viewpoint_m: frame.sensor_in_world,
-        ..SegmentConfig::live()
-    };
+    let config = SegmentConfig::live().seen_from(frame.world_from_sensor);
     let fresh = segment(&frame.points_in_world, &config);
     // A wall far from everything: holds no points, so RANSAC finds the table again.
     let mut stale = fresh.planes[0].clone();

@@ -17,6 +17,7 @@ pub struct DaemonConfig {
     pub sensor: Vec<SensorSection>,
     pub socket: SocketSection,
     pub pipeline: PipelineSection,
+    pub workspace: WorkspaceSection,
     pub track: TrackSection,
     pub mesh: MeshSection,
     pub stats: StatsSection,
@@ -29,6 +30,7 @@ impl Default for DaemonConfig {
             sensor: vec![SensorSection::default()],
             socket: SocketSection::default(),
             pipeline: PipelineSection::default(),
+            workspace: WorkspaceSection::default(),
             track: TrackSection::default(),
             mesh: MeshSection::default(),
             stats: StatsSection::default(),
@@ -131,6 +133,46 @@ impl Default for PipelineSection {
             max_range_m: 4.0,
             segment_stride: 2,
         }
+    }
+}
+
+/// Where objects can be, in the world frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorkspaceSection {
+    /// Corners of the box, world frame, metres: points outside it are not segmented (they
+    /// still show the sensor's free space, so what leaves the box is carved away). Either
+    /// corner may be left out, leaving that side open. Default: no box.
+    pub min_m: Option<[f32; 3]>,
+    pub max_m: Option<[f32; 3]>,
+    /// The largest object, metres: larger clusters, and larger planes that do not face up,
+    /// are background (walls, furniture). Default 1.2.
+    pub max_object_size_m: f32,
+}
+
+impl Default for WorkspaceSection {
+    fn default() -> Self {
+        Self {
+            min_m: None,
+            max_m: None,
+            max_object_size_m: 1.2,
+        }
+    }
+}
+
+impl WorkspaceSection {
+    /// Whether `p` (world frame) is inside the box.
+    pub fn contains(&self, p: glam::Vec3) -> bool {
+        self.min_m
+            .is_none_or(|lo| p.cmpge(glam::Vec3::from(lo)).all())
+            && self
+                .max_m
+                .is_none_or(|hi| p.cmple(glam::Vec3::from(hi)).all())
+    }
+
+    /// Whether the box bounds anything.
+    pub fn is_bounded(&self) -> bool {
+        self.min_m.is_some() || self.max_m.is_some()
     }
 }
 
@@ -301,6 +343,31 @@ impl DaemonConfig {
             }
         }
         positive("pipeline.max_range_m", self.pipeline.max_range_m)?;
+        positive(
+            "workspace.max_object_size_m",
+            self.workspace.max_object_size_m,
+        )?;
+        for (key, corner) in [
+            ("workspace.min_m", self.workspace.min_m),
+            ("workspace.max_m", self.workspace.max_m),
+        ] {
+            if corner.is_some_and(|c| !c.iter().all(|v| v.is_finite())) {
+                return Err(ConfigError::OutOfRange {
+                    key,
+                    value: format!("{corner:?}"),
+                    expected: "three finite numbers",
+                });
+            }
+        }
+        if let (Some(lo), Some(hi)) = (self.workspace.min_m, self.workspace.max_m) {
+            if lo.iter().zip(&hi).any(|(lo, hi)| lo >= hi) {
+                return Err(ConfigError::OutOfRange {
+                    key: "workspace.max_m",
+                    value: format!("{hi:?}"),
+                    expected: "above workspace.min_m on every axis",
+                });
+            }
+        }
         positive("track.voxel_size_m", self.track.voxel_size_m)?;
         positive("track.leave_after_s", self.track.leave_after_s)?;
         positive("track.remesh_interval_s", self.track.remesh_interval_s)?;
@@ -482,6 +549,18 @@ const KEY_WANTS: &[(&str, &str)] = &[
         "a whole number of pixels from 1 to 16, for example 2",
     ),
     (
+        "workspace.min_m",
+        "three coordinates in metres, [x, y, z], for example [-0.6, -0.4, 0.0]",
+    ),
+    (
+        "workspace.max_m",
+        "three coordinates in metres, [x, y, z], for example [0.6, 0.4, 0.8]",
+    ),
+    (
+        "workspace.max_object_size_m",
+        "a length in metres, for example 1.2",
+    ),
+    (
         "track.voxel_size_m",
         "a length in metres, for example 0.005",
     ),
@@ -516,6 +595,7 @@ const KEY_WANTS: &[(&str, &str)] = &[
     ),
     ("socket", "a [socket] table (see tacmesh.example.toml)"),
     ("pipeline", "a [pipeline] table (see tacmesh.example.toml)"),
+    ("workspace", "a [workspace] table (see tacmesh.example.toml)"),
     ("track", "a [track] table (see tacmesh.example.toml)"),
     ("mesh", "a [mesh] table (see tacmesh.example.toml)"),
     ("stats", "a [stats] table (see tacmesh.example.toml)"),
@@ -835,6 +915,26 @@ mod tests {
                 Path::new("/tmp/tacmesh-1000.sock")
             );
         }
+    }
+
+    #[test]
+    fn a_workspace_box_bounds_what_is_segmented() {
+        let config = parse("[workspace]\nmin_m = [-1, -1, 0]\nmax_m = [1, 1, 0.8]\n").unwrap();
+        let box_ = &config.workspace;
+        assert!(box_.is_bounded());
+        assert!(box_.contains(glam::Vec3::new(0.5, -0.5, 0.4)));
+        assert!(!box_.contains(glam::Vec3::new(0.5, -0.5, 0.9)));
+        assert!(!DaemonConfig::default().workspace.is_bounded());
+        assert!(DaemonConfig::default()
+            .workspace
+            .contains(glam::Vec3::splat(1e6)));
+        let err = parse("[workspace]\nmin_m = [0, 0, 1]\nmax_m = [1, 1, 1]\n").unwrap_err();
+        assert!(err.to_string().contains("workspace.max_m"), "{err}");
+        let err = parse("[workspace]\nmax_object_size_m = 0\n").unwrap_err();
+        assert!(
+            err.to_string().contains("workspace.max_object_size_m"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -81,8 +81,9 @@ impl Perception {
         if self.objects.is_empty() {
             tracing::warn!(
                 "end of stream after {frames} frame{}: no object to mesh: no cluster of at \
-                 least {} points was left once the support planes ({} in the last frame) were \
-                 taken out; is the sensor pose right, and the object within {} m?",
+                 least {} points was left once the support planes and background ({} planes in \
+                 the last frame) were taken out; is the sensor pose right, and the object \
+                 within {} m?",
                 if frames == 1 { "" } else { "s" },
                 self.objects.config().min_cluster_points,
                 self.plane_hints.len(),
@@ -151,13 +152,21 @@ impl Perception {
             }
         };
         let viewpoint = Vec3::from(world_from_sensor.translation);
+        // Outside the workspace box nothing is segmented; the free space still sees it all.
+        let workspace = &shared.config.workspace;
+        let in_workspace: Option<Vec<Vec3>> = workspace.is_bounded().then(|| {
+            points
+                .iter()
+                .map(|&p| if workspace.contains(p) { p } else { Vec3::NAN })
+                .collect()
+        });
+        let segment_points = in_workspace.as_deref().unwrap_or(&points);
         counters.record(Stage::Deproject, started.elapsed());
 
         let started = Instant::now();
         let stride = shared.config.pipeline.segment_stride.max(1);
         let strided = organised.is_some() && stride > 1;
         let config = SegmentConfig {
-            viewpoint_m: viewpoint,
             // Cluster sizes count segmented points: one in stride² of an organised frame.
             min_cluster_points: if strided {
                 (self.segment.min_cluster_points / (stride * stride) as usize).max(20)
@@ -171,14 +180,20 @@ impl Perception {
             } else {
                 self.segment.max_cluster_points
             },
-            ..self.segment.clone()
+            max_object_size_m: workspace.max_object_size_m,
+            ..self.segment.clone().seen_from(world_from_sensor)
         };
         let clusters = match organised {
-            Some((width, height)) if stride > 1 => {
-                strided_clusters(&points, width, height, stride, &config, &self.plane_hints)
-            }
+            Some((width, height)) if stride > 1 => strided_clusters(
+                segment_points,
+                width,
+                height,
+                stride,
+                &config,
+                &self.plane_hints,
+            ),
             _ => {
-                let segmentation = segment_with_hints(&points, &config, &self.plane_hints);
+                let segmentation = segment_with_hints(segment_points, &config, &self.plane_hints);
                 let clusters = segmentation
                     .objects
                     .iter()
@@ -189,9 +204,17 @@ impl Perception {
         };
         let (segmentation, clusters) = clusters;
         counters.record(Stage::Segment, started.elapsed());
+        tracing::debug!(
+            supports = segmentation.planes.len(),
+            background_planes = segmentation.background.len(),
+            object_faces = segmentation.object_faces.len(),
+            background_clusters = segmentation.background_clusters,
+            clusters = ?clusters.iter().map(Vec::len).collect::<Vec<_>>(),
+            "segmented"
+        );
 
         let plane_update = self.planes.update(&segmentation.planes);
-        self.plane_hints = segmentation.planes;
+        self.plane_hints = segmentation.plane_hints();
 
         let started = Instant::now();
         let report = self.objects.integrate(&FrameClusters {
@@ -277,7 +300,7 @@ fn strided_clusters(
         })
         .collect();
     let segmentation = segment_with_hints(&sub, config, hints);
-    let plane_band_m = config.plane_distance_m + config.plane_margin_m;
+
     let mut clusters = vec![Vec::new(); segmentation.objects.len()];
     for v in 0..height {
         for u in 0..width {
@@ -290,10 +313,15 @@ fn strided_clusters(
             if label == 0 || p.distance(sub[j]) > LABEL_SPREAD_M {
                 continue;
             }
+            let band_m = config.plane_distance_at(p);
             if segmentation
                 .planes
                 .iter()
-                .any(|plane| plane.signed_distance_m(p) <= plane_band_m)
+                .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
+                || segmentation
+                    .background
+                    .iter()
+                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m)
             {
                 continue;
             }

@@ -146,7 +146,7 @@ impl TrackedObject {
         let mut object = Self {
             id,
             grid: MomentGrid::new(config.voxel_size_m),
-            coarse: MomentGrid::new(config.voxel_size_m * config.icp_coarse_factor as f32),
+            coarse: MomentGrid::new(config.voxel_size_m),
             change: ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points),
             world_from_object: Affine3A::IDENTITY,
             object_from_world: Affine3A::IDENTITY,
@@ -162,7 +162,14 @@ impl TrackedObject {
             bounds_in_object: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             resets_in_a_row: 0,
         };
-        object.restart(Quat::IDENTITY, centroid_in_world, capture_time, config);
+        let range_m = centroid_in_world.distance(viewpoint_in_world);
+        object.restart(
+            Quat::IDENTITY,
+            centroid_in_world,
+            capture_time,
+            range_m,
+            config,
+        );
         object.fuse(
             points_in_world,
             centroid_in_world,
@@ -198,7 +205,16 @@ impl TrackedObject {
         let predicted = self.predicted_world_from_object(capture_time);
         let stride = points_in_world.len().div_ceil(config.icp_max_points).max(1);
         let sample: Vec<Vec3> = points_in_world.iter().step_by(stride).copied().collect();
-        let aligned = self.align(&sample, centroid_in_world, predicted, config, scratch);
+        let range_m = centroid_in_world.distance(viewpoint_in_world);
+        let noise_m = config.depth_noise_per_m2 * range_m * range_m;
+        let aligned = self.align(
+            &sample,
+            centroid_in_world,
+            predicted,
+            noise_m,
+            config,
+            scratch,
+        );
         let outcome = match aligned {
             Ok(object_from_world) => {
                 if self.resets_in_a_row > 1 {
@@ -231,7 +247,7 @@ impl TrackedObject {
             Err(failure) => {
                 self.resets_in_a_row = self.resets_in_a_row.saturating_add(1);
                 let rotation = Quat::from_mat3a(&self.world_from_object.matrix3);
-                self.restart(rotation, centroid_in_world, capture_time, config);
+                self.restart(rotation, centroid_in_world, capture_time, range_m, config);
                 Observed::Reset(failure)
             }
         };
@@ -251,11 +267,16 @@ impl TrackedObject {
     /// centroids agree (a sudden start or stop the velocity did not foresee). The coarse
     /// level's planes, fitted over boxes centimetres wide, round off edges and corners, so it
     /// runs only when the fine level cannot reach.
+    ///
+    /// `noise_m` is the sensor's depth noise (σ) at the object's range: far away, and with a
+    /// noisy sensor, it widens the rejection distance and the accepted residual (see
+    /// [`TrackConfig::depth_noise_per_m2`]), so that noise alone does not reset an object.
     fn align(
         &self,
         points_in_world: &[Vec3],
         centroid_in_world: Vec3,
         predicted: Affine3A,
+        noise_m: f32,
         config: &TrackConfig,
         scratch: &mut IcpScratch,
     ) -> Result<Affine3A, IcpFailure> {
@@ -263,18 +284,19 @@ impl TrackedObject {
             IcpLevel {
                 grid: &self.coarse,
                 iterations: config.icp_coarse_iterations,
-                reject_m: config.icp_reject_voxels * self.coarse.voxel_size_m(),
+                reject_m: (config.icp_reject_voxels * self.coarse.voxel_size_m())
+                    .max(3.0 * noise_m),
             },
             IcpLevel {
                 grid: &self.grid,
                 iterations: config.icp_fine_iterations,
-                reject_m: config.icp_reject_voxels * self.grid.voxel_size_m(),
+                reject_m: (config.icp_reject_voxels * self.grid.voxel_size_m()).max(3.0 * noise_m),
             },
         ];
         let settings = IcpSettings {
             min_inliers: config.icp_min_inliers,
             min_inlier_fraction: config.icp_min_inlier_fraction,
-            max_rms_m: config.icp_max_rms_m,
+            max_rms_m: config.icp_max_rms_m.max(1.5 * noise_m),
             prior_weight: config.icp_prior_weight,
             degenerate_ratio: config.icp_degenerate_ratio,
         };
@@ -318,16 +340,19 @@ impl TrackedObject {
         self.object_from_world = world_from_object.inverse();
     }
 
-    /// Empties the fused state and puts the object origin at `centroid_in_world`.
+    /// Empties the fused state and puts the object origin at `centroid_in_world`, `range_m`
+    /// from the sensor, which sets the voxel size ([`TrackConfig::voxel_at_range`]).
     fn restart(
         &mut self,
         rotation: Quat,
         centroid_in_world: Vec3,
         capture_time: Duration,
+        range_m: f32,
         config: &TrackConfig,
     ) {
-        self.grid = MomentGrid::new(config.voxel_size_m);
-        self.coarse = MomentGrid::new(config.voxel_size_m * config.icp_coarse_factor as f32);
+        let voxel_m = config.voxel_at_range(range_m);
+        self.grid = MomentGrid::new(voxel_m);
+        self.coarse = MomentGrid::new(voxel_m * config.icp_coarse_factor as f32);
         self.change = ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points);
         self.velocity = BodyVelocity::default();
         self.points_fused = 0;

@@ -16,8 +16,8 @@ pub struct SimFrame {
     /// The object each point's pixel sees without noise (0 the table, 1..=3 the objects,
     /// `u32::MAX` nothing).
     pub truth: Vec<u32>,
-    /// The sensor position in the world frame.
-    pub sensor_in_world: Vec3,
+    /// The sensor's pose in the world frame.
+    pub world_from_sensor: glam::Affine3A,
 }
 
 /// Frame `frame_index` of `SimulatedDepthCamera::tabletop(seed)`.
@@ -39,7 +39,7 @@ pub fn tabletop_frame(seed: u64, frame_index: u64) -> SimFrame {
     SimFrame {
         points_in_world,
         truth,
-        sensor_in_world: Vec3::from(frame.world_from_sensor.translation),
+        world_from_sensor: frame.world_from_sensor,
     }
 }
 

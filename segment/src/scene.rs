@@ -1,0 +1,267 @@
+//! The scene model: which planes are supports, which are background, and which clusters can be
+//! objects at all. A robot's camera sees a table or a floor to put things on, and, at room
+//! scale, walls, a ceiling and furniture that are no object anyone picks up or touches on
+//! purpose. For a physics proxy that is the difference between the mug and the wall behind it.
+//!
+//! Planes (RANSAC's, largest first) by orientation and size:
+//! - A **support** faces up: its normal (towards the sensor) is within
+//!   [`SegmentConfig::max_support_tilt_deg`] of [`SegmentConfig::up`], and it is at least
+//!   [`SegmentConfig::min_support_size_m`] across and covers half the square of that. Objects rest on it. A smaller plane facing up
+//!   (a book, a box's lid) is part of an object: a small plane raised above the table is not a
+//!   table.
+//! - A **background** plane faces sideways or down (a wall, a ceiling, a cupboard's front) and
+//!   is larger than any object: [`SegmentConfig::max_object_size_m`] across, covering half the
+//!   square of that. Its points are dropped.
+//! - Any other plane is the face of an object (a box's side, a laptop's screen): its points stay
+//!   object candidates.
+//!
+//! Clusters that cannot be objects are background:
+//! - lying on a background plane (80 % of its points within [`WALL_RELIEF_M`] of it): the
+//!   bumps of a wall, a whiteboard, what the noise of a far wall leaves beside the band;
+//! - larger than [`SegmentConfig::max_object_size_m`] (twice the largest distance from the
+//!   centroid): furniture, pieces of wall;
+//! - no deeper along the sensor's axis ([`SegmentConfig::forward`]) than one depth step at
+//!   their depth ([`SegmentConfig::range_step_per_m2`]): a slice of a far wall at one disparity
+//!   level, which is an artefact of the sensor, not a thing.
+
+use glam::Vec3;
+
+use crate::planes::SupportPlane;
+use crate::range::RangeDistance;
+use crate::SegmentConfig;
+
+/// What a plane found by RANSAC is, by [`plane_role`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum PlaneRole {
+    Support,
+    Background,
+    ObjectFace,
+}
+
+/// The role of each of `planes` (RANSAC's, largest first; see the module docs). The first
+/// plane facing up may be half [`SegmentConfig::min_support_size_m`]: the one table of a
+/// tabletop scan may be small and mostly hidden; a second support (a table above the floor)
+/// must be the full size, or it is the top of an object.
+pub(crate) fn plane_roles(
+    planes: &[SupportPlane],
+    band: &RangeDistance,
+    config: &SegmentConfig,
+) -> Vec<PlaneRole> {
+    let up = config.up.normalize_or_zero();
+    let max_tilt = config.max_support_tilt_deg.clamp(0.0, 180.0).to_radians();
+    let mut dominant_taken = false;
+    let mut roles: Vec<PlaneRole> = planes
+        .iter()
+        .map(|plane| {
+            let faces_up = up != Vec3::ZERO && plane.normal.dot(up) >= max_tilt.cos();
+            // Half the square of the size: a table or wall partly hidden behind objects still
+            // covers that much; a plane that only grazes the tops or sides of a few objects
+            // does not.
+            let large = |size_m: f32| {
+                plane.extent_m() >= size_m && plane.area_m2() >= 0.5 * size_m * size_m
+            };
+            let support_size = if dominant_taken {
+                config.min_support_size_m
+            } else {
+                0.5 * config.min_support_size_m
+            };
+            if faces_up && large(support_size) {
+                dominant_taken = true;
+                PlaneRole::Support
+            } else if !faces_up && large(config.max_object_size_m) {
+                PlaneRole::Background
+            } else {
+                PlaneRole::ObjectFace
+            }
+        })
+        .collect();
+    // A smaller plane parallel to a background plane and within its relief is more of the same
+    // wall (a whiteboard on it, or the wall's noise fitted twice).
+    for k in 0..planes.len() {
+        if roles[k] != PlaneRole::ObjectFace {
+            continue;
+        }
+        let plane = &planes[k];
+        let foot = band.viewpoint - plane.normal * plane.signed_distance_m(band.viewpoint);
+        let same_wall = planes.iter().zip(&roles).any(|(wall, &role)| {
+            role == PlaneRole::Background
+                && wall.normal.dot(plane.normal) >= SAME_SURFACE_COS
+                && (wall.offset_m - plane.offset_m).abs() <= relief_at(band, foot)
+        });
+        if same_wall {
+            roles[k] = PlaneRole::Background;
+        }
+    }
+    roles
+}
+
+/// Why a cluster is not an object, by [`background_cluster`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum NotAnObject {
+    TooLarge,
+    OneDepthStep,
+    OnBackground,
+}
+
+/// A cluster with at least this fraction of its points near a background plane is part of it.
+const ON_BACKGROUND_FRACTION: f32 = 0.8;
+
+/// What stands out of a wall by less than this, in metres, is part of the wall (a whiteboard,
+/// a poster, a light switch, and the noise of a stereo camera at 2 m, which is about ±2 cm for
+/// a RealSense D435: its wall came out as four parallel RANSAC planes 2 cm apart); an object
+/// in front of a wall stands out farther. Far away, three plane bands if that is more.
+const WALL_RELIEF_M: f32 = 0.05;
+
+/// Planes within this angle of a background plane's orientation, and within its relief, are
+/// the same surface.
+const SAME_SURFACE_COS: f32 = 0.996; // 5°
+
+fn relief_at(band: &RangeDistance, p: Vec3) -> f32 {
+    WALL_RELIEF_M.max(3.0 * band.at(p))
+}
+
+/// Whether the cluster of `indices` into `points` is background (see the module docs).
+/// `band` is the plane inlier distance at a point.
+pub(crate) fn background_cluster(
+    points: &[Vec3],
+    indices: &[u32],
+    background: &[SupportPlane],
+    band: &RangeDistance,
+    config: &SegmentConfig,
+) -> Option<NotAnObject> {
+    if indices.is_empty() {
+        return None;
+    }
+    for plane in background {
+        let near = indices
+            .iter()
+            .filter(|&&i| {
+                let p = points[i as usize];
+                plane.signed_distance_m(p).abs() <= relief_at(band, p)
+            })
+            .count();
+        if near as f32 >= ON_BACKGROUND_FRACTION * indices.len() as f32 {
+            return Some(NotAnObject::OnBackground);
+        }
+    }
+    let n = indices.len() as f32;
+    let centroid = indices
+        .iter()
+        .fold(Vec3::ZERO, |sum, &i| sum + points[i as usize])
+        / n;
+    let forward = config.forward.normalize_or_zero();
+    let (mut nearest, mut farthest, mut radius_sq) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
+    let mut mean_depth = 0.0;
+    for &i in indices {
+        let p = points[i as usize];
+        let depth = (p - config.viewpoint_m).dot(forward);
+        nearest = nearest.min(depth);
+        farthest = farthest.max(depth);
+        mean_depth += depth / n;
+        radius_sq = radius_sq.max(p.distance_squared(centroid));
+    }
+    if 2.0 * radius_sq.sqrt() > config.max_object_size_m {
+        return Some(NotAnObject::TooLarge);
+    }
+    let step_m = config.range_step_per_m2.max(0.0) * mean_depth * mean_depth;
+    // Noise spreads a real surface over more than a step; a near object's step is a few
+    // millimetres, far below any object's depth, so this only ever takes far slices.
+    if farthest - nearest <= step_m {
+        return Some(NotAnObject::OneDepthStep);
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(normal: Vec3, offset_m: f32, extent_m: f32, area_m2: f32) -> SupportPlane {
+        SupportPlane {
+            normal: normal.normalize(),
+            offset_m,
+            inliers: Vec::new(),
+            outline: Vec::new(),
+            extent_m,
+            area_m2,
+        }
+    }
+
+    #[test]
+    fn tables_support_walls_are_background_small_planes_are_objects() {
+        // A camera's optical frame: up is −y. A table seen 45° from above, a wall ahead, a
+        // ceiling, a box's lid on the table, and a second, small plane facing up.
+        let config = SegmentConfig::default();
+        let band = RangeDistance::new(0.008, 0.0035, 0.75, Vec3::ZERO);
+        let planes = [
+            plane(Vec3::new(0.0, -1.0, -1.0), -0.8, 1.2, 0.9),
+            plane(Vec3::NEG_Z, -3.0, 2.5, 3.0),
+            plane(Vec3::Y, -1.2, 2.0, 2.0),
+            plane(Vec3::new(0.0, -1.0, -0.9), -0.7, 0.3, 0.06),
+            plane(Vec3::NEG_Z, -2.97, 0.8, 0.4),
+            plane(Vec3::NEG_X, -0.5, 0.4, 0.1),
+        ];
+        let roles = plane_roles(&planes, &band, &config);
+        use PlaneRole::*;
+        assert_eq!(
+            roles,
+            [Support, Background, Background, ObjectFace, Background, ObjectFace],
+            "the fifth is more of the wall (3 cm in front of it, parallel); the sixth a box side"
+        );
+        // A plane that grazes a few objects' tops: wide, but covers little.
+        let grazing = plane(Vec3::new(0.0, -1.0, -1.0), -0.7, 0.8, 0.03);
+        assert_eq!(plane_roles(&[grazing], &band, &config), [ObjectFace]);
+    }
+
+    #[test]
+    fn far_slices_walls_bumps_and_furniture_are_not_objects() {
+        let config = SegmentConfig::default();
+        let band = RangeDistance::new(0.008, 0.0035, 0.75, Vec3::ZERO);
+        let grid = |origin: Vec3, du: Vec3, dv: Vec3, n: usize| -> Vec<Vec3> {
+            (0..n * n)
+                .map(|k| origin + du * (k % n) as f32 + dv * (k / n) as f32)
+                .collect()
+        };
+        let all = |points: &[Vec3]| (0..points.len() as u32).collect::<Vec<u32>>();
+        // A 20 cm box face at 1 m, turned 45° to the camera: an object.
+        let face = grid(
+            Vec3::new(-0.1, 0.0, 1.0),
+            Vec3::new(0.007, 0.0, 0.007),
+            Vec3::new(0.0, 0.01, 0.0),
+            20,
+        );
+        assert_eq!(
+            background_cluster(&face, &all(&face), &[], &band, &config),
+            None
+        );
+        // A strip of a wall at 3.5 m at one depth level (flat in z): a sensor artefact.
+        let slice = grid(
+            Vec3::new(-0.3, 0.0, 3.5),
+            Vec3::new(0.03, 0.0, 0.0),
+            Vec3::new(0.0, 0.01, 0.0),
+            20,
+        );
+        assert_eq!(
+            background_cluster(&slice, &all(&slice), &[], &band, &config),
+            Some(NotAnObject::OneDepthStep)
+        );
+        // A 1.5 m piece of furniture.
+        let big = grid(
+            Vec3::new(-0.75, -0.5, 2.0),
+            Vec3::new(0.075, 0.0, 0.02),
+            Vec3::new(0.0, 0.05, 0.0),
+            21,
+        );
+        assert_eq!(
+            background_cluster(&big, &all(&big), &[], &band, &config),
+            Some(NotAnObject::TooLarge)
+        );
+        // The same box face with a wall 2 cm behind it, parallel: a whiteboard, part of it.
+        let normal = Vec3::new(1.0, 0.0, -1.0).normalize();
+        let wall = plane(normal, normal.dot(face[0]) - 0.02, 2.0, 2.0);
+        assert_eq!(
+            background_cluster(&face, &all(&face), &[wall], &band, &config),
+            Some(NotAnObject::OnBackground)
+        );
+    }
+}
