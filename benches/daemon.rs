@@ -1,6 +1,8 @@
-//! The live daemon under its default load: `cargo bench --bench daemon [-- SECONDS [SPEC]]`.
-//! A `replay:` SPEC is played looped at maximum rate (`--unpaced --loop`), the recordings'
-//! throughput benchmark.
+//! The live daemon under its default load: `cargo bench --bench daemon [-- SECONDS [SPEC
+//! [paced]]]`. A `replay:` SPEC is played looped at maximum rate (`--unpaced --loop`), the
+//! recordings' throughput benchmark; with `paced` after it, at its recorded rate, as a camera
+//! would deliver it (frames the pipeline cannot take are dropped, as live). The daemon's last
+//! counter line (standard error) gives object births and removals.
 //!
 //! Starts the real `tacmesh run` (this profile's build) on the default demo scene (640×480 at
 //! 30 fps, paced) for 60 s, subscribes over its socket, and reports: sustained frame rate,
@@ -21,11 +23,17 @@ fn main() {
     let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     let seconds: f64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(60.0);
     let sensor = args.next().unwrap_or_else(|| "sim".into());
+    // A recording plays as fast as the pipeline takes it, unless `paced` follows the spec:
+    // then at its recorded rate, as a live camera would deliver it.
+    let paced = args.next().is_some_and(|a| a == "paced");
     let replay = sensor.starts_with("replay:");
     let duration = seconds.to_string();
     let mut extra = vec!["--duration-s", duration.as_str()];
     if replay {
-        extra.extend(["--unpaced", "--loop"]);
+        extra.push("--loop");
+        if !paced {
+            extra.push("--unpaced");
+        }
     }
     let support::RunningDaemon {
         child: mut daemon,

@@ -75,18 +75,9 @@ pub(crate) fn euclidean_clusters(
     if candidates.is_empty() || base_m <= 0.0 || !base_m.is_finite() {
         return Vec::new();
     }
-    const MAX_BAND: usize = 12;
-    let band_of = |p: Vec3| -> usize {
-        let ratio = tolerance.at(p) / base_m;
-        if ratio <= 1.0 {
-            0
-        } else {
-            (ratio.log2().ceil() as usize).clamp(1, MAX_BAND)
-        }
-    };
     let bands: Vec<u8> = candidates
         .iter()
-        .map(|&i| band_of(points[i as usize]) as u8)
+        .map(|&i| tolerance.band(points[i as usize]) as u8)
         .collect();
     let band_count = bands.iter().copied().max().map_or(1, |b| b as usize + 1);
     let mut members: Vec<Vec<u32>> = vec![Vec::new(); band_count];

@@ -332,7 +332,12 @@ pub fn segment_timed(
     let objects = if config.voxel_size_m > 0.0 && config.voxel_size_m.is_finite() {
         // Creases and clusters on the cells' centroids; each point takes its cell's object.
         let clock = Instant::now();
-        let cells = voxels::voxel_cells(points, &candidates, config.voxel_size_m);
+        let cells = voxels::voxel_cells(
+            points,
+            &candidates,
+            config.voxel_size_m,
+            &cluster_reach(config),
+        );
         let all_cells: Vec<u32> = (0..cells.counts.len() as u32).collect();
         times.voxels = clock.elapsed();
         let cell_objects = find_objects(

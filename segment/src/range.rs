@@ -9,6 +9,9 @@
 
 use glam::Vec3;
 
+/// The last range band ([`RangeDistance::band`]).
+pub(crate) const MAX_BAND: usize = 12;
+
 /// A distance that is `base_m` near the sensor and `factor` depth steps far from it, whichever
 /// is larger: `max(base_m, factor · step_per_m2 · r²)` at range `r` from the viewpoint.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,6 +42,17 @@ impl RangeDistance {
     pub(crate) fn at(&self, p: Vec3) -> f32 {
         self.base_m
             .max(self.per_m2 * p.distance_squared(self.viewpoint))
+    }
+
+    /// The range band of `p`: 0 where the distance is the base one, `k` where it is more than
+    /// `2^(k-1)` and at most `2^k` times it (at most [`MAX_BAND`]).
+    pub(crate) fn band(&self, p: Vec3) -> usize {
+        let ratio = self.at(p) / self.base_m;
+        if ratio <= 1.0 || !ratio.is_finite() {
+            0
+        } else {
+            (ratio.log2().ceil() as usize).clamp(1, MAX_BAND)
+        }
     }
 }
 

@@ -10,6 +10,8 @@
 use glam::{DVec3, Vec3};
 use rustc_hash::FxHashMap;
 
+use crate::range::RangeDistance;
+
 /// The occupied cells of a set of points.
 pub(crate) struct Cells {
     /// Centroid of each cell's points, in order of first occurrence.
@@ -20,21 +22,30 @@ pub(crate) struct Cells {
     pub(crate) cell_of: Vec<u32>,
 }
 
-/// Bins `indices` (of finite points) into cells of side `cell_m` (> 0, finite).
-pub(crate) fn voxel_cells(points: &[Vec3], indices: &[u32], cell_m: f32) -> Cells {
-    let inv_cell_m = 1.0 / cell_m;
-    let mut id_of: FxHashMap<[i32; 3], u32> = FxHashMap::default();
+/// Bins `indices` (of finite points) into cells of side `cell_m` (> 0, finite), times `2^k`
+/// for points in range band `k` of `coarsen` (see `RangeDistance::band`): far away, where
+/// the sensor resolves less and the clustering links farther, cells grow as the links do, so
+/// that a far wall costs the later stages no more per square metre of view than a near table.
+pub(crate) fn voxel_cells(
+    points: &[Vec3],
+    indices: &[u32],
+    cell_m: f32,
+    coarsen: &RangeDistance,
+) -> Cells {
+    let mut id_of: FxHashMap<[i32; 4], u32> = FxHashMap::default();
     // Sums relative to each cell's corner, so that far-off clouds keep their precision.
     let mut sums: Vec<DVec3> = Vec::new();
     let mut counts: Vec<u32> = Vec::new();
     let mut corners: Vec<Vec3> = Vec::new();
     let mut cell_of = Vec::with_capacity(indices.len());
-    let mut last: Option<([i32; 3], u32)> = None;
+    let mut last: Option<([i32; 4], u32)> = None;
     for &i in indices {
         let p = points[i as usize];
-        let q = (p * inv_cell_m).floor();
+        let band = coarsen.band(p);
+        let side_m = cell_m * (1u32 << band) as f32;
+        let q = (p / side_m).floor();
         // Saturating casts: absurdly distant points only share cells.
-        let key = [q.x as i32, q.y as i32, q.z as i32];
+        let key = [q.x as i32, q.y as i32, q.z as i32, band as i32];
         let id = match last {
             Some((last_key, id)) if last_key == key => id,
             _ => {
@@ -43,7 +54,7 @@ pub(crate) fn voxel_cells(points: &[Vec3], indices: &[u32], cell_m: f32) -> Cell
                 if id == next {
                     sums.push(DVec3::ZERO);
                     counts.push(0);
-                    corners.push(q * cell_m);
+                    corners.push(q * side_m);
                 }
                 last = Some((key, id));
                 id
@@ -79,7 +90,8 @@ mod tests {
             Vec3::NAN, // not listed below
             Vec3::new(0.017, 0.001, 0.001),
         ];
-        let cells = voxel_cells(&points, &[0, 1, 2, 4], 0.01);
+        let fixed = RangeDistance::new(0.015, 0.0, 1.0, Vec3::ZERO);
+        let cells = voxel_cells(&points, &[0, 1, 2, 4], 0.01, &fixed);
         assert_eq!(cells.counts, vec![2, 2]);
         assert_eq!(cells.cell_of, vec![0, 1, 0, 1]);
         assert!(cells.centroids[0].distance(Vec3::splat(0.002)) < 1e-6);

@@ -3,7 +3,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{StageLatency, Stats};
 use tacmesh_publish::PublisherCounters;
@@ -64,8 +64,17 @@ pub struct Counters {
     pub meshing_runs: AtomicU64,
     pub meshing_failures: AtomicU64,
     pub pose_updates: AtomicU64,
+    /// Objects created and removed by the tracker, whether confirmed or not: on a static
+    /// scene both should stop once it has been seen (churn, see [`Counters::births_per_s`]).
+    pub objects_born: AtomicU64,
+    pub objects_removed: AtomicU64,
     windows: Mutex<Windows>,
+    /// When the births of the last [`BIRTH_WINDOW`] happened.
+    recent_births: Mutex<std::collections::VecDeque<Instant>>,
 }
+
+/// Births per second are counted over this window.
+pub const BIRTH_WINDOW: Duration = Duration::from_secs(10);
 
 impl Default for Counters {
     fn default() -> Self {
@@ -79,6 +88,9 @@ impl Default for Counters {
             meshing_runs: AtomicU64::new(0),
             meshing_failures: AtomicU64::new(0),
             pose_updates: AtomicU64::new(0),
+            objects_born: AtomicU64::new(0),
+            objects_removed: AtomicU64::new(0),
+            recent_births: Mutex::new(std::collections::VecDeque::new()),
             windows: Mutex::new(Windows {
                 stages: Stage::ALL
                     .iter()
@@ -104,6 +116,10 @@ pub struct CounterSnapshot {
     pub meshing_runs: u64,
     pub meshing_failures: u64,
     pub pose_updates: u64,
+    pub objects_born: u64,
+    pub objects_removed: u64,
+    /// Object births per second over the last [`BIRTH_WINDOW`] (or since start, if shorter).
+    pub births_per_s: f64,
     /// Log lines that standard error did not take (a log reader or journald went away).
     pub log_lines_dropped: u64,
     /// `(stage name, p50 ms, p99 ms)` in pipeline order.
@@ -122,14 +138,51 @@ impl Counters {
         crate::lock(&self.windows).stages[index].record_ms(elapsed.as_secs_f32() * 1e3);
     }
 
+    /// Counts `n` objects born now.
+    pub fn record_births(&self, n: usize) {
+        if n == 0 {
+            return;
+        }
+        Self::add(&self.objects_born, n as u64);
+        let now = Instant::now();
+        let mut recent = crate::lock(&self.recent_births);
+        recent.extend(std::iter::repeat_n(now, n));
+        Self::expire_births(&mut recent, now);
+    }
+
+    fn expire_births(recent: &mut std::collections::VecDeque<Instant>, now: Instant) {
+        while recent
+            .front()
+            .is_some_and(|&t| now.duration_since(t) > BIRTH_WINDOW)
+        {
+            recent.pop_front();
+        }
+    }
+
+    /// Births per second over the last [`BIRTH_WINDOW`], or over `uptime` if that is shorter
+    /// (at least one second, so that the first frame's objects do not read as a storm).
+    pub fn births_per_s(&self, uptime: Duration) -> f64 {
+        let now = Instant::now();
+        let mut recent = crate::lock(&self.recent_births);
+        Self::expire_births(&mut recent, now);
+        let window = uptime.clamp(Duration::from_secs(1), BIRTH_WINDOW);
+        recent.len() as f64 / window.as_secs_f64()
+    }
+
     pub fn record_frame_to_publish(&self, latency: Duration) {
         crate::lock(&self.windows)
             .frame_to_publish
             .record_ms(latency.as_secs_f32() * 1e3);
     }
 
-    pub fn snapshot(&self, ring: RingStats, publisher: PublisherCounters) -> CounterSnapshot {
+    pub fn snapshot(
+        &self,
+        ring: RingStats,
+        publisher: PublisherCounters,
+        uptime: Duration,
+    ) -> CounterSnapshot {
         let load = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        let births_per_s = self.births_per_s(uptime);
         let windows = crate::lock(&self.windows);
         let stages = Stage::ALL
             .iter()
@@ -153,6 +206,9 @@ impl Counters {
             meshing_runs: load(&self.meshing_runs),
             meshing_failures: load(&self.meshing_failures),
             pose_updates: load(&self.pose_updates),
+            objects_born: load(&self.objects_born),
+            objects_removed: load(&self.objects_removed),
+            births_per_s,
             log_lines_dropped: crate::log_sink::dropped_lines(),
             stages,
             frame_to_publish_p50_ms,
@@ -195,7 +251,7 @@ impl CounterSnapshot {
             .collect();
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
-             objects {}, meshing runs {} (failed {}), pose updates {}, meshes published {}, \
+             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, meshes published {}, \
              bytes sent {}, subscribers {} (dropped {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
@@ -206,6 +262,9 @@ impl CounterSnapshot {
             self.source_restarts,
             self.malformed_frames,
             self.objects_tracked,
+            self.objects_born,
+            self.births_per_s,
+            self.objects_removed,
             self.meshing_runs,
             self.meshing_failures,
             self.pose_updates,

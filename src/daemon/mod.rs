@@ -248,9 +248,11 @@ impl Daemon {
 
     /// The counters now.
     pub fn counters(&self) -> CounterSnapshot {
-        self.shared
-            .counters
-            .snapshot(self.shared.ring.stats(), self.shared.publisher.counters())
+        self.shared.counters.snapshot(
+            self.shared.ring.stats(),
+            self.shared.publisher.counters(),
+            self.started.elapsed(),
+        )
     }
 
     /// Sends stats and logs counters periodically until `stop` is requested, then shuts down.

@@ -241,6 +241,8 @@ impl Perception {
             for id in plane_update.removed {
                 board.remove(id, &shared.publisher);
             }
+            counters.record_births(report.created.len());
+            Counters::add(&counters.objects_removed, report.removed.len() as u64);
             for &id in &report.created {
                 if let Some(pose) = self.objects.world_from_object(id) {
                     board.create(id, pose);
