@@ -74,9 +74,8 @@ def read_ply(path: pathlib.Path) -> tuple[Array, npt.NDArray[np.int64]]:
     at = end
     for name, count, props in elements:
         if name == "face":
-            count_type = props[0][0].split()[0] if False else None
             # A face is "property list COUNT_TYPE INDEX_TYPE vertex_indices".
-            line = next(l for l in header if l.startswith("property list"))
+            line = next(h for h in header if h.startswith("property list"))
             _, _, count_t, index_t, _ = line.split()
             for _ in range(count):
                 n = int(np.frombuffer(data, codes[count_t], 1, at)[0])
@@ -84,7 +83,6 @@ def read_ply(path: pathlib.Path) -> tuple[Array, npt.NDArray[np.int64]]:
                 idx = np.frombuffer(data, codes[index_t], n, at)
                 at += n * sizes[index_t]
                 faces.append([int(i) for i in idx[:3]])
-            del count_type
         else:
             dtype = np.dtype([(p[1], "<" + codes[p[0]]) for p in props])
             table = np.frombuffer(data, dtype, count, at)

@@ -90,12 +90,12 @@ fn scene(name: &'static str) -> Scene {
 }
 
 /// The labelled mOSD scans played as one recording that switches scenes every 3 s at 30 fps
-/// (the first scene again at the end): 2 s into each scene, what is published is this scene
+/// (the first scene again at the end): 1 s into each scene, what is published is this scene
 /// and nothing of the last one. Every published object lies on the scene's points (median
 /// distance of its surface samples under 1 cm), and every labelled object is published (at
 /// least half of its points within 2 cm of a published object's surface).
 #[test]
-fn a_scene_change_replaces_what_is_published_within_two_seconds() {
+fn a_scene_change_replaces_what_is_published_within_a_second() {
     const NAMES: [&str; 9] = [
         "osd_test0",
         "osd_test17",
@@ -107,13 +107,16 @@ fn a_scene_change_replaces_what_is_published_within_two_seconds() {
         "osd_test57",
         "osd_test0",
     ];
-    // Still open (issue 11): after the seven-object scene 45, the sixteen-object clutter of
-    // scene 57 loses two labelled objects to tracks of the scene before (their clusters are
-    // taken as pieces of old objects) and one far object's mesh drifts off its points. Its
-    // figures are printed but not asserted until segmentation and association handle it;
-    // every other scene is held to the bounds.
+    // Still open (issue 11): after the seven-object scene 45, two of the sixteen objects of
+    // the cluttered scene 57 stand where scene 45's objects stood; their clusters are taken by
+    // the old tracks (by centroid, then as fragments lying on their fused surfaces), and for
+    // the first second nothing new is published there. Its figures are printed but not
+    // asserted until association checks shape as well as position; every other scene is held
+    // to the bounds one second after the switch.
     const NOT_YET_HELD: [&str; 1] = ["osd_test57"];
     const FRAMES_PER_SCENE: usize = 90;
+    // One second into a scene.
+    const JUDGED_AFTER_FRAMES: usize = 30;
     const FPS: f64 = 30.0;
     let scene_time = Duration::from_secs_f64(FRAMES_PER_SCENE as f64 / FPS);
     let _one = ONE_DAEMON_AT_A_TIME
@@ -160,9 +163,9 @@ fn a_scene_change_replaces_what_is_published_within_two_seconds() {
             Message::Stats(stats) => stats.frames_in as usize,
             _ => continue,
         };
-        // Scene `checked` is judged once two thirds of its frames (2 s) have come in, before
+        // Scene `checked` is judged once a second of its frames has come in, before
         // the next scene's first frame.
-        if frames_in < checked * FRAMES_PER_SCENE + FRAMES_PER_SCENE * 2 / 3 {
+        if frames_in < checked * FRAMES_PER_SCENE + JUDGED_AFTER_FRAMES {
             continue;
         }
         if frames_in >= (checked + 1) * FRAMES_PER_SCENE {
@@ -203,8 +206,10 @@ fn a_scene_change_replaces_what_is_published_within_two_seconds() {
                 .filter(|&&p| near_published.distance(p) < 0.02)
                 .count() as f32
                 / points.len().div_ceil(10) as f32;
+            let centroid = points.iter().fold(Vec3::ZERO, |a, &p| a + p) / points.len() as f32;
             eprintln!(
-                "{} (scene {checked}): labelled object {label} ({} points) {:.0} % covered",
+                "{} (scene {checked}): labelled object {label} ({} points, centroid \
+                 {centroid:.3}) {:.0} % covered",
                 scene.name,
                 points.len(),
                 covered * 100.0
@@ -248,4 +253,278 @@ fn log_lines_about_objects(log: &str) -> Vec<&str> {
                 .any(|w| l.contains(w))
         })
         .collect()
+}
+
+/// Area of a mesh, square metres.
+fn area_m2(mesh: &TriMesh) -> f32 {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
+/// An object's size: the longest side of its bounding box (world axes), metres. A cluster
+/// larger than `[workspace] max_object_size_m` (twice its farthest point from its centroid)
+/// is never an object; fusion adds the noise of many frames and views to that.
+fn size_m(mesh: &TriMesh) -> f32 {
+    let (lo, hi) = mesh
+        .vertices
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    (hi - lo).max_element().max(0.0)
+}
+
+/// Object births in a daemon log so far.
+fn births(log: &str) -> usize {
+    log.lines()
+        .filter(|l| l.contains("object appeared"))
+        .count()
+}
+
+/// Plays `spec` looped (paced, as recorded) for `seconds` and returns the last mesh of every
+/// object published at the end (support planes left out), the births in the first and the
+/// second half of the run, the daemon's peak resident memory in MiB and its log.
+fn play(spec: &str, seconds: f64) -> (BTreeMap<u64, TriMesh>, usize, usize, f64, String) {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut daemon = Run::start(&["--sensor", spec, "--loop"], &dir.path().join("t.sock"));
+    let mut subscription = daemon.subscribe();
+    let started = Instant::now();
+    let mut published: BTreeMap<u64, TriMesh> = BTreeMap::new();
+    let mut half_births = None;
+    let mut peak_kib = 0;
+    while started.elapsed() < Duration::from_secs_f64(seconds) {
+        if half_births.is_none() && started.elapsed() >= Duration::from_secs_f64(seconds / 2.0) {
+            half_births = Some(births(&daemon.log()));
+        }
+        peak_kib = peak_kib.max(daemon.rss_kib());
+        match subscription.next_message().expect("the subscription") {
+            Message::Upsert(u) if u.object_id < FIRST_PLANE_ID => {
+                published.insert(u.object_id, u.mesh);
+            }
+            Message::Remove { object_id } => {
+                published.remove(&object_id);
+            }
+            _ => {}
+        }
+    }
+    assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
+    let log = daemon.log();
+    let (status, _) = daemon.terminate();
+    assert!(status.success(), "{status}\n{log}");
+    let first_half = half_births.unwrap_or(0);
+    let second_half = births(&log) - first_half;
+    (
+        published,
+        first_half,
+        second_half,
+        peak_kib as f64 / 1024.0,
+        log,
+    )
+}
+
+/// The room-scale recordings, played as recorded: what is published is objects, not walls,
+/// ceilings or slices of depth (none larger than the workspace's largest object, 1.2 m, or
+/// over a face budget), the object set settles (no births on a static recording once it has
+/// been seen), and the daemon stays under 256 MiB.
+#[test]
+fn room_recordings_publish_objects_not_walls() {
+    /// No object needs more faces than this at the default residual; the wall of the D435
+    /// recording had 31,763 before the scene model.
+    const FACE_BUDGET: usize = 3000;
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let recordings = [
+        (
+            "PrimeSense .oni",
+            format!(
+                "replay:{}",
+                path_str(&test_data(
+                    "recordings/openni1_primesense_12frames_640x480.oni"
+                ))
+            ),
+        ),
+        (
+            "RealSense D435 .bag",
+            format!(
+                "replay:{}",
+                path_str(&test_data(
+                    "recordings/realsense_d435_single_depth_color_640x480.bag"
+                ))
+            ),
+        ),
+        (
+            "slambook",
+            format!(
+                "replay:{}?fx=518&fy=519&cx=325.5&cy=253.5",
+                path_str(&test_data("depth/slambook_kinect"))
+            ),
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, spec) in &recordings {
+        let (published, early, late, peak_mib, log) = play(spec, 8.0);
+        eprintln!(
+            "{name}: {} objects published, births {early} then {late}, peak RSS {peak_mib:.0} MiB",
+            published.len()
+        );
+        for (id, mesh) in &published {
+            let (faces, size) = (mesh.triangles.len(), size_m(mesh));
+            eprintln!(
+                "{name}: object {id}: {faces} faces, {size:.2} m, {:.3} m²",
+                area_m2(mesh)
+            );
+            if faces > FACE_BUDGET || size > 1.2 * 1.1 {
+                failures.push(format!("{name}: object {id}: {faces} faces, {size:.2} m"));
+            }
+        }
+        if published.is_empty() {
+            failures.push(format!("{name}: nothing published\n{log}"));
+        }
+        // The PrimeSense recording is 12 frames (0.4 s) of a person moving, looped: its scene
+        // jumps back at every loop, and a few objects are born again (0-9 in 4 s measured,
+        // more when the machine is busy and fewer frames of each loop are seen). The other two
+        // are static: once seen, nothing new.
+        let churn_allowed = if name.starts_with("PrimeSense") {
+            20
+        } else {
+            2
+        };
+        if late > churn_allowed {
+            failures.push(format!(
+                "{name}: {late} objects born in the last 4 s (after {early} in the first 4 s)"
+            ));
+        }
+        if peak_mib > 256.0 {
+            failures.push(format!("{name}: peak RSS {peak_mib:.0} MiB"));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The PCL Kinect grabber frames (three frames of a desk with a laptop and a box, about 1 cm of
+/// camera jitter between them) looped for 60 s at 30 fps: no object in view is removed, and
+/// each object on the desk (within 1 m of the camera: the laptop, the box and a small thing
+/// beside them) keeps its area within 10 % of its first converged mesh (the one published 10 s
+/// in), with under 5 % of its area farther than 3 cm from the measured points. Before the
+/// weight cap and free-space carving the laptop grew from 0.11 to 0.20–0.27 m² with 27–45 % of
+/// its area off the data.
+///
+/// Still open (issue 11): the clutter 1.2–1.7 m away at the back of the desk, seen in part
+/// and differently in each frame, is aligned badly: its poses jump by 2–9 cm from one update
+/// to the next (also with the fixed 5 mm voxels of before), so up to half of such an object's
+/// area lies off the data. Those objects are printed, not held to the bounds.
+#[test]
+fn camera_jitter_neither_bloats_nor_drops_static_objects() {
+    const SECONDS: f64 = 60.0;
+    const CONVERGED_AT_S: f64 = 10.0;
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let frames = test_data("depth/pcl_kinect_grabber");
+    let spec = format!("replay:{}?fx=525&fy=525&cx=320&cy=240", path_str(&frames));
+    // The measured points: the three frames, as the daemon sees them.
+    let captured = dir.path().join("frames");
+    let out = crate::util::tacmesh(&[
+        "capture",
+        "--sensor",
+        &spec,
+        "--frames",
+        "3",
+        "--out",
+        path_str(&captured),
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let mut data = Vec::new();
+    for k in 0..3 {
+        let cloud = tacmesh::formats::read_cloud(&captured.join(format!("frame-{k}.ply")))
+            .expect("a captured frame");
+        data.extend(cloud.points);
+    }
+    let near_data = Nearest::new(&data, 0.05);
+
+    let mut daemon = Run::start(&["--sensor", &spec, "--loop"], &dir.path().join("t.sock"));
+    let mut subscription = daemon.subscribe();
+    let started = Instant::now();
+    let mut latest: BTreeMap<u64, TriMesh> = BTreeMap::new();
+    let mut converged: Option<BTreeMap<u64, f32>> = None;
+    let mut removed = Vec::new();
+    while started.elapsed() < Duration::from_secs_f64(SECONDS) {
+        if converged.is_none() && started.elapsed() >= Duration::from_secs_f64(CONVERGED_AT_S) {
+            converged = Some(latest.iter().map(|(&id, m)| (id, area_m2(m))).collect());
+        }
+        match subscription.next_message().expect("the subscription") {
+            Message::Upsert(u) if u.object_id < FIRST_PLANE_ID => {
+                latest.insert(u.object_id, u.mesh);
+            }
+            Message::Remove { object_id } => {
+                if converged.is_some() {
+                    removed.push(object_id);
+                }
+                latest.remove(&object_id);
+            }
+            _ => {}
+        }
+    }
+    assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
+    let log = daemon.log();
+    let (status, _) = daemon.terminate();
+    assert!(status.success(), "{status}");
+    let converged = converged.expect("the run reached its converged time");
+    assert!(!converged.is_empty(), "nothing was published:\n{log}");
+    let mut failures = Vec::new();
+    for (id, first) in &converged {
+        let Some(mesh) = latest.get(id) else {
+            failures.push(format!(
+                "object {id} ({first:.3} m²) was removed while in view"
+            ));
+            continue;
+        };
+        let area = area_m2(mesh);
+        let samples = surface_samples(mesh, 4000);
+        let range_m =
+            (samples.iter().fold(Vec3::ZERO, |a, &p| a + p) / samples.len().max(1) as f32).length();
+        let held = range_m <= 1.0;
+        let off = samples
+            .iter()
+            .filter(|&&p| near_data.distance(p) > 0.03)
+            .count() as f32
+            / samples.len().max(1) as f32;
+        eprintln!(
+            "object {id} ({range_m:.2} m away{}): {first:.4} m² at {CONVERGED_AT_S} s, \
+             {area:.4} m² at {SECONDS} s ({:+.1} %), {:.1} % of its area over 3 cm from the \
+             data, {} faces",
+            if held { "" } else { ", not yet held" },
+            100.0 * (area / first - 1.0),
+            100.0 * off,
+            mesh.triangles.len()
+        );
+        if !held {
+            continue;
+        }
+        if (area / first - 1.0).abs() > 0.10 {
+            failures.push(format!(
+                "object {id}: area {first:.4} -> {area:.4} m² ({:+.1} %)",
+                100.0 * (area / first - 1.0)
+            ));
+        }
+        if off >= 0.05 {
+            failures.push(format!(
+                "object {id}: {:.1} % of its area is over 3 cm from the data",
+                100.0 * off
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{}\nremoved after convergence: {removed:?}\nthe daemon's object events:\n{}",
+        failures.join("\n"),
+        log_lines_about_objects(&log).join("\n")
+    );
 }

@@ -129,6 +129,10 @@ pub struct TrackedObject {
     bounds_in_object: (Vec3, Vec3),
     /// Alignment failures since the last success (a burst of resets is logged once).
     pub resets_in_a_row: u32,
+    /// The fused weight when a frame last saw the object (measured when carving touched it;
+    /// see `ObjectMap::integrate`): carving that takes most of it from an object no cluster
+    /// matches any more means the object is gone.
+    pub weight_when_seen: f64,
 }
 
 impl TrackedObject {
@@ -161,6 +165,7 @@ impl TrackedObject {
             last_meshed: None,
             bounds_in_object: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             resets_in_a_row: 0,
+            weight_when_seen: points_in_world.len() as f64,
         };
         let range_m = centroid_in_world.distance(viewpoint_in_world);
         object.restart(
@@ -284,13 +289,12 @@ impl TrackedObject {
             IcpLevel {
                 grid: &self.coarse,
                 iterations: config.icp_coarse_iterations,
-                reject_m: (config.icp_reject_voxels * self.coarse.voxel_size_m())
-                    .max(3.0 * noise_m),
+                reject_m: config.icp_reject_voxels * self.coarse.voxel_size_m(),
             },
             IcpLevel {
                 grid: &self.grid,
                 iterations: config.icp_fine_iterations,
-                reject_m: (config.icp_reject_voxels * self.grid.voxel_size_m()).max(3.0 * noise_m),
+                reject_m: config.icp_reject_voxels * self.grid.voxel_size_m(),
             },
         ];
         let settings = IcpSettings {

@@ -155,6 +155,10 @@ fn clean_cluster(points: &[Vec3], min_points: usize) -> Option<(Vec<Vec3>, Vec3)
     Some((finite, centroid))
 }
 
+/// An object no cluster matches that has lost more than half its weight to carving since a
+/// frame last saw it is gone ([`ObjectMap::integrate`]).
+const CARVED_AWAY: f64 = 0.5;
+
 impl ObjectMap {
     /// An empty map; fails on an invalid config.
     pub fn new(config: TrackConfig) -> Result<Self, TrackError> {
@@ -317,9 +321,21 @@ impl ObjectMap {
             for object in self.objects.values_mut() {
                 let carved = object.carve(free, &self.config);
                 report.carved_cells += carved.dropped;
+                let seen_now = object.last_seen == now;
                 // Only carving lowers the weight: an object it left alone keeps what it had.
-                if carved.weakened > 0
-                    && object.fused_weight() < self.config.min_cluster_points as f64
+                if carved.weakened == 0 && !seen_now {
+                    continue;
+                }
+                let weight = object.fused_weight();
+                if seen_now {
+                    object.weight_when_seen = weight;
+                    continue;
+                }
+                // Gone: too little left to be a cluster, or, with no cluster seen where it is,
+                // most of what it had when last seen is seen through (the rest is hidden behind
+                // something, where waiting `leave_after` would keep a stale mesh published).
+                if weight < self.config.min_cluster_points as f64
+                    || (!seen_now && weight < CARVED_AWAY * object.weight_when_seen)
                 {
                     vanished.push(object.id);
                 }
