@@ -90,12 +90,12 @@ fn scene(name: &'static str) -> Scene {
 }
 
 /// The labelled mOSD scans played as one recording that switches scenes every 3 s at 30 fps
-/// (the first scene again at the end): 1 s into each scene, what is published is this scene
+/// (the first scene again at the end): 1.2 s into each scene, what is published is this scene
 /// and nothing of the last one. Every published object lies on the scene's points (median
 /// distance of its surface samples under 1 cm), and every labelled object is published (at
 /// least half of its points within 2 cm of a published object's surface).
 #[test]
-fn a_scene_change_replaces_what_is_published_within_a_second() {
+fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
     const NAMES: [&str; 9] = [
         "osd_test0",
         "osd_test17",
@@ -112,11 +112,14 @@ fn a_scene_change_replaces_what_is_published_within_a_second() {
     // the old tracks (by centroid, then as fragments lying on their fused surfaces), and for
     // the first second nothing new is published there. Its figures are printed but not
     // asserted until association checks shape as well as position; every other scene is held
-    // to the bounds one second after the switch.
+    // to the bounds 1.2 s after the switch.
     const NOT_YET_HELD: [&str; 1] = ["osd_test57"];
     const FRAMES_PER_SCENE: usize = 90;
-    // One second into a scene.
-    const JUDGED_AFTER_FRAMES: usize = 30;
+    // 1.2 s into a scene. What the camera sees through is gone within a few frames; but an
+    // old object hidden behind the new scene's objects cannot be seen through (it may still be
+    // there) and leaves `leave_after` (1 s) after it was last seen, so a judgement at exactly
+    // one second would race that.
+    const JUDGED_AFTER_FRAMES: usize = 36;
     const FPS: f64 = 30.0;
     let scene_time = Duration::from_secs_f64(FRAMES_PER_SCENE as f64 / FPS);
     let _one = ONE_DAEMON_AT_A_TIME
@@ -163,7 +166,7 @@ fn a_scene_change_replaces_what_is_published_within_a_second() {
             Message::Stats(stats) => stats.frames_in as usize,
             _ => continue,
         };
-        // Scene `checked` is judged once a second of its frames has come in, before
+        // Scene `checked` is judged once 1.2 s of its frames have come in, before
         // the next scene's first frame.
         if frames_in < checked * FRAMES_PER_SCENE + JUDGED_AFTER_FRAMES {
             continue;

@@ -78,6 +78,13 @@ pub enum IcpFailure {
     LargeResidual { rms_m: f32, max_rms_m: f32 },
     #[error("the normal equations are singular (no points near the fused surface)")]
     Degenerate,
+    /// Not the solver's own verdict: the tracker's check of an alignment against the frame's
+    /// free space (`TrackedObject::observe`).
+    #[error(
+        "the camera sees through {percent:.0} % of the fused surface at the aligned pose \
+         (something else stands there now)"
+    )]
+    SeenThrough { percent: f32 },
 }
 
 /// Plane caches, one per grid (told apart by voxel size); clear with

@@ -135,6 +135,14 @@ pub struct TrackedObject {
     pub weight_when_seen: f64,
 }
 
+/// An alignment that puts more than this share of the fused surface where the camera sees
+/// through is refused (see [`TrackedObject::observe`]). A right alignment has a few per cent
+/// there at most: silhouette voxels, and what carving is about to take.
+const SEEN_THROUGH_MAX: f32 = 0.25;
+
+/// At most this many voxels are projected for [`TrackedObject::observe`]'s check.
+const SEEN_THROUGH_SAMPLE: usize = 500;
+
 impl TrackedObject {
     /// A new object from its first cluster (finite points, centroid given); its frame is
     /// axis-aligned with the world with its origin at the centroid, which keeps alignment
@@ -198,12 +206,22 @@ impl TrackedObject {
     }
 
     /// Aligns a new cluster (finite points) to the fused model, updates the pose, fuses it.
+    ///
+    /// With the frame's free space, an alignment is accepted only if the camera does not see
+    /// through much of the fused surface at the new pose ([`SEEN_THROUGH_MAX`]): when one
+    /// object is replaced by a similar one in the same place, the new cluster can align to the
+    /// old model with a turn that lands half its points on it, and would carry the old shape
+    /// on under a wrong pose. The free space tells: at that pose much of the old surface lies
+    /// where the camera now sees the table behind it. Such an object restarts from the
+    /// cluster instead.
+    #[allow(clippy::too_many_arguments)] // the frame's facts, each needed once
     pub fn observe(
         &mut self,
         points_in_world: &[Vec3],
         centroid_in_world: Vec3,
         capture_time: Duration,
         viewpoint_in_world: Vec3,
+        free: Option<&FreeSpace>,
         config: &TrackConfig,
         scratch: &mut IcpScratch,
     ) -> Observed {
@@ -212,14 +230,29 @@ impl TrackedObject {
         let sample: Vec<Vec3> = points_in_world.iter().step_by(stride).copied().collect();
         let range_m = centroid_in_world.distance(viewpoint_in_world);
         let noise_m = config.depth_noise_per_m2 * range_m * range_m;
-        let aligned = self.align(
-            &sample,
-            centroid_in_world,
-            predicted,
-            noise_m,
-            config,
-            scratch,
-        );
+        let aligned = self
+            .align(
+                &sample,
+                centroid_in_world,
+                predicted,
+                noise_m,
+                config,
+                scratch,
+            )
+            .and_then(|object_from_world| match free {
+                Some(free) => {
+                    let fraction =
+                        self.seen_through_fraction(free, object_from_world.inverse(), config);
+                    if fraction > SEEN_THROUGH_MAX {
+                        Err(IcpFailure::SeenThrough {
+                            percent: 100.0 * fraction,
+                        })
+                    } else {
+                        Ok(object_from_world)
+                    }
+                }
+                None => Ok(object_from_world),
+            });
         let outcome = match aligned {
             Ok(object_from_world) => {
                 if self.resets_in_a_row > 1 {
@@ -537,6 +570,37 @@ impl TrackedObject {
                 });
         }
         carved
+    }
+
+    /// The share of the fused weight (over at most [`SEEN_THROUGH_SAMPLE`] voxels, an even
+    /// stride) that the camera sees through with the object at `world_from_object`.
+    fn seen_through_fraction(
+        &self,
+        free: &FreeSpace,
+        world_from_object: Affine3A,
+        config: &TrackConfig,
+    ) -> f32 {
+        let margin = DepthMargin {
+            margin_m: config.carve_margin_m,
+            per_m2: config.carve_margin_per_m2,
+        };
+        let stride = self.grid.len().div_ceil(SEEN_THROUGH_SAMPLE).max(1);
+        let (mut through, mut total) = (0.0f64, 0.0f64);
+        for (_, m) in self.grid.iter().step_by(stride) {
+            let Some(centroid) = m.centroid() else {
+                continue;
+            };
+            let weight = m.count.min(f64::from(config.saturated_cell_points));
+            total += weight;
+            if free.seen_through(world_from_object.transform_point3(centroid), &margin) {
+                through += weight;
+            }
+        }
+        if total > 0.0 {
+            (through / total) as f32
+        } else {
+            0.0
+        }
     }
 
     /// The points' worth of weight the fused state holds.

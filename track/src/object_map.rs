@@ -217,6 +217,7 @@ impl ObjectMap {
                 *centroid,
                 now,
                 frame.viewpoint_m,
+                frame.free_space.as_ref(),
                 &self.config,
                 &mut self.scratch,
             ) {
