@@ -381,7 +381,7 @@ pub fn segment_timed(
     let mut objects: Vec<Vec<u32>> = objects
         .into_iter()
         .filter(|object| {
-            scene::background_cluster(points, object, &background, &band, config).is_none()
+            scene::background_cluster(points, object, &planes, &background, &band, config).is_none()
         })
         .collect();
     let background_clusters = before - objects.len();

@@ -20,6 +20,8 @@
 //!   bumps of a wall, a whiteboard, what the noise of a far wall leaves beside the band;
 //! - larger than [`SegmentConfig::max_object_size_m`] (twice the largest distance from the
 //!   centroid): furniture, pieces of wall;
+//! - flat and facing up with no support below it: a strip of floor too small or too hidden to
+//!   be found as a plane (on a support, such a patch is a book or a lid: an object);
 //! - no deeper along the sensor's axis ([`SegmentConfig::forward`]) than one depth step at
 //!   their depth ([`SegmentConfig::range_step_per_m2`]): a slice of a far wall at one disparity
 //!   level, which is an artefact of the sensor, not a thing.
@@ -101,6 +103,7 @@ pub(crate) enum NotAnObject {
     TooLarge,
     OneDepthStep,
     OnBackground,
+    PieceOfFloor,
 }
 
 /// A cluster with at least this fraction of its points near a background plane is part of it.
@@ -125,6 +128,7 @@ fn relief_at(band: &RangeDistance, p: Vec3) -> f32 {
 pub(crate) fn background_cluster(
     points: &[Vec3],
     indices: &[u32],
+    supports: &[SupportPlane],
     background: &[SupportPlane],
     band: &RangeDistance,
     config: &SegmentConfig,
@@ -169,7 +173,44 @@ pub(crate) fn background_cluster(
     if farthest - nearest <= step_m {
         return Some(NotAnObject::OneDepthStep);
     }
+    if flat_and_facing_up(points, indices, centroid, band, config)
+        && !supports.iter().any(|s| s.signed_distance_m(centroid) > 0.0)
+    {
+        return Some(NotAnObject::PieceOfFloor);
+    }
     None
+}
+
+/// Flat for [`flat_and_facing_up`]: 90 % of the points within this many plane bands (at the
+/// centroid) of the cluster's own plane.
+const FLAT_BANDS: f32 = 1.5;
+
+/// Whether the cluster is a flat patch facing up: its own plane faces up (within
+/// [`SegmentConfig::max_support_tilt_deg`]) and 90 % of its points lie within
+/// [`FLAT_BANDS`] plane bands of it. On a support that is a book or a lid, an object; with
+/// no support below it, it is a strip of a floor or a table that was too small, or too much
+/// hidden, to be found as a plane (the PrimeSense room's floor along the bottom of the view).
+fn flat_and_facing_up(
+    points: &[Vec3],
+    indices: &[u32],
+    centroid: Vec3,
+    band: &RangeDistance,
+    config: &SegmentConfig,
+) -> bool {
+    let up = config.up.normalize_or_zero();
+    let max_tilt = config.max_support_tilt_deg.clamp(0.0, 180.0).to_radians();
+    let Some((normal, offset)) = crate::planes::fit_plane(points, indices) else {
+        return false;
+    };
+    if normal.dot(up).abs() < max_tilt.cos() {
+        return false;
+    }
+    let limit = FLAT_BANDS * band.at(centroid);
+    let near = indices
+        .iter()
+        .filter(|&&i| (normal.dot(points[i as usize]) - offset).abs() <= limit)
+        .count();
+    near as f32 >= 0.9 * indices.len() as f32
 }
 
 #[cfg(test)]
@@ -231,7 +272,7 @@ mod tests {
             20,
         );
         assert_eq!(
-            background_cluster(&face, &all(&face), &[], &band, &config),
+            background_cluster(&face, &all(&face), &[], &[], &band, &config),
             None
         );
         // A strip of a wall at 3.5 m at one depth level (flat in z): a sensor artefact.
@@ -242,7 +283,7 @@ mod tests {
             20,
         );
         assert_eq!(
-            background_cluster(&slice, &all(&slice), &[], &band, &config),
+            background_cluster(&slice, &all(&slice), &[], &[], &band, &config),
             Some(NotAnObject::OneDepthStep)
         );
         // A 1.5 m piece of furniture.
@@ -253,14 +294,35 @@ mod tests {
             21,
         );
         assert_eq!(
-            background_cluster(&big, &all(&big), &[], &band, &config),
+            background_cluster(&big, &all(&big), &[], &[], &band, &config),
             Some(NotAnObject::TooLarge)
+        );
+        // A 30 cm flat patch facing up (optical frame: up is -y) 1 m below a camera looking
+        // down at 45 degrees: with no support below it, a strip of floor; above a table, a book.
+        let patch = grid(
+            Vec3::new(-0.15, 1.0, 1.0),
+            Vec3::new(0.015, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.015),
+            20,
+        );
+        let forward = SegmentConfig {
+            forward: Vec3::new(0.0, 1.0, 1.0).normalize(),
+            ..config.clone()
+        };
+        assert_eq!(
+            background_cluster(&patch, &all(&patch), &[], &[], &band, &forward),
+            Some(NotAnObject::PieceOfFloor)
+        );
+        let table = plane(Vec3::NEG_Y, -1.05, 1.2, 1.0);
+        assert_eq!(
+            background_cluster(&patch, &all(&patch), &[table], &[], &band, &forward),
+            None
         );
         // The same box face with a wall 2 cm behind it, parallel: a whiteboard, part of it.
         let normal = Vec3::new(1.0, 0.0, -1.0).normalize();
         let wall = plane(normal, normal.dot(face[0]) - 0.02, 2.0, 2.0);
         assert_eq!(
-            background_cluster(&face, &all(&face), &[wall], &band, &config),
+            background_cluster(&face, &all(&face), &[], &[wall], &band, &config),
             Some(NotAnObject::OnBackground)
         );
     }
