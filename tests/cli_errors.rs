@@ -217,3 +217,20 @@ fn mesh_help_names_every_cloud_extension_the_reader_takes() {
         );
     }
 }
+
+#[test]
+fn capture_of_a_missing_recording_or_a_bad_spec_is_an_error_not_a_panic() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("frames");
+    let out = out.to_str().expect("a UTF-8 path");
+    let stderr = stderr_of(&[
+        "capture",
+        "--sensor",
+        "replay:/nonexistent/x.oni",
+        "--out",
+        out,
+    ]);
+    assert!(stderr.contains("/nonexistent/x.oni"), "{stderr}");
+    let stderr = stderr_of(&["capture", "--sensor", "nosuch:thing", "--out", out]);
+    assert!(stderr.contains("nosuch"), "{stderr}");
+}
