@@ -85,6 +85,17 @@ pub enum IcpFailure {
          (something else stands there now)"
     )]
     SeenThrough { percent: f32 },
+    /// Also the tracker's: a still object would have jumped, with a cluster that lands on it
+    /// only in part (`TrackedObject::observe`).
+    #[error(
+        "a still object would have jumped by {shift_mm:.0} mm and {turn_deg:.0} degrees with \
+         only {percent:.0} % of the cluster on it (another object stands there now)"
+    )]
+    JumpedWhileStill {
+        shift_mm: f32,
+        turn_deg: f32,
+        percent: f32,
+    },
 }
 
 /// Plane caches, one per grid (told apart by voxel size); clear with

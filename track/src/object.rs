@@ -135,6 +135,17 @@ pub struct TrackedObject {
     pub weight_when_seen: f64,
 }
 
+/// An object that has not moved for [`STILL_BEFORE_JUMP`] and whose next alignment moves it
+/// by more than [`JUMP_M`] or [`JUMP_RAD`] with fewer than [`FAMILIAR_FRACTION`] of the
+/// cluster's points on its surface is taken to be another object standing where it stood
+/// (the cluttered mOSD scene put a similar object where the last scene's stood; the old
+/// model was turned 18 degrees to take half its points), and restarts from the cluster. A
+/// still object that is really pushed or picked up keeps its shape, and nearly all of the
+/// cluster lands on it.
+const STILL_BEFORE_JUMP: Duration = Duration::from_millis(500);
+const JUMP_M: f32 = 0.005;
+const JUMP_RAD: f32 = 0.05; // about 3 degrees
+
 /// An alignment that puts more than this share of the fused surface where the camera sees
 /// through is refused (see [`TrackedObject::observe`]). A right alignment has a few per cent
 /// there at most: silhouette voxels, and what carving is about to take.
@@ -239,6 +250,26 @@ impl TrackedObject {
                 config,
                 scratch,
             )
+            .and_then(|(object_from_world, inlier_share)| {
+                // A jump of a still object is believed only when the cluster lands on it
+                // almost whole (see `JUMP_M`).
+                let delta = self.object_from_world * object_from_world.inverse();
+                let shift_m = Vec3::from(delta.translation).length();
+                let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
+                let still_for = capture_time.saturating_sub(self.last_pose_change);
+                if still_for >= STILL_BEFORE_JUMP
+                    && (shift_m > JUMP_M || turn_rad > JUMP_RAD)
+                    && inlier_share < FAMILIAR_FRACTION
+                {
+                    Err(IcpFailure::JumpedWhileStill {
+                        shift_mm: 1e3 * shift_m,
+                        turn_deg: turn_rad.to_degrees(),
+                        percent: 100.0 * inlier_share,
+                    })
+                } else {
+                    Ok(object_from_world)
+                }
+            })
             .and_then(|object_from_world| match free {
                 Some(free) => {
                     let fraction =
@@ -317,7 +348,9 @@ impl TrackedObject {
         noise_m: f32,
         config: &TrackConfig,
         scratch: &mut IcpScratch,
-    ) -> Result<Affine3A, IcpFailure> {
+    ) -> Result<(Affine3A, f32), IcpFailure> {
+        let share =
+            |a: &crate::icp::Alignment| a.inliers as f32 / points_in_world.len().max(1) as f32;
         let levels = [
             IcpLevel {
                 grid: &self.coarse,
@@ -352,8 +385,8 @@ impl TrackedObject {
             scratch,
         );
         if let Ok(a) = fine_only {
-            if a.inliers as f32 >= FAMILIAR_FRACTION * points_in_world.len() as f32 {
-                return Ok(a.object_from_world);
+            if share(&a) >= FAMILIAR_FRACTION {
+                return Ok((a.object_from_world, share(&a)));
             }
         }
         let offset = centroid_in_world - predicted.transform_point3(self.centroid_in_object);
@@ -361,10 +394,10 @@ impl TrackedObject {
         if offset.length() > levels[1].reject_m {
             starts.push((Affine3A::from_translation(offset) * predicted).inverse());
         }
-        let mut last = fine_only.map(|a| a.object_from_world);
+        let mut last = fine_only.map(|a| (a.object_from_world, share(&a)));
         for start in starts {
             last = align_to_grids(&levels, points_in_world, start, anchor, &settings, scratch)
-                .map(|a| a.object_from_world);
+                .map(|a| (a.object_from_world, share(&a)));
             if last.is_ok() {
                 break;
             }
