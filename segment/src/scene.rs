@@ -40,6 +40,14 @@ pub(crate) enum PlaneRole {
     ObjectFace,
 }
 
+/// Whether `normal` faces up: within [`SegmentConfig::max_support_tilt_deg`] of
+/// [`SegmentConfig::up`].
+fn faces_up(normal: Vec3, config: &SegmentConfig) -> bool {
+    let up = config.up.normalize_or_zero();
+    let max_tilt = config.max_support_tilt_deg.clamp(0.0, 180.0).to_radians();
+    up != Vec3::ZERO && normal.dot(up) >= max_tilt.cos()
+}
+
 /// The role of each of `planes` (RANSAC's, largest first; see the module docs). The first
 /// plane facing up may be half [`SegmentConfig::min_support_size_m`]: the one table of a
 /// tabletop scan may be small and mostly hidden; a second support (a table above the floor)
@@ -49,13 +57,11 @@ pub(crate) fn plane_roles(
     band: &RangeDistance,
     config: &SegmentConfig,
 ) -> Vec<PlaneRole> {
-    let up = config.up.normalize_or_zero();
-    let max_tilt = config.max_support_tilt_deg.clamp(0.0, 180.0).to_radians();
     let mut dominant_taken = false;
     let mut roles: Vec<PlaneRole> = planes
         .iter()
         .map(|plane| {
-            let faces_up = up != Vec3::ZERO && plane.normal.dot(up) >= max_tilt.cos();
+            let faces_up = faces_up(plane.normal, config);
             // Half the square of the size: a table or wall partly hidden behind objects still
             // covers that much; a plane that only grazes the tops or sides of a few objects
             // does not.
@@ -197,12 +203,11 @@ fn flat_and_facing_up(
     band: &RangeDistance,
     config: &SegmentConfig,
 ) -> bool {
-    let up = config.up.normalize_or_zero();
-    let max_tilt = config.max_support_tilt_deg.clamp(0.0, 180.0).to_radians();
     let Some((normal, offset)) = crate::planes::fit_plane(points, indices) else {
         return false;
     };
-    if normal.dot(up).abs() < max_tilt.cos() {
+    // A fitted plane's normal has either sign.
+    if !(faces_up(normal, config) || faces_up(-normal, config)) {
         return false;
     }
     let limit = FLAT_BANDS * band.at(centroid);

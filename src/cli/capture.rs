@@ -71,12 +71,7 @@ pub fn run(args: CaptureArgs) -> anyhow::Result<()> {
                     .check()
                     .with_context(|| format!("frame {k} of {} is malformed", section.spec))?;
                 frame.world_from_sensor = world_from_rig * frame.world_from_sensor;
-                frame
-                    .deproject_organised(max_range_m)
-                    .points_in_world
-                    .into_iter()
-                    .filter(|p| p.is_finite())
-                    .collect()
+                frame.deproject(max_range_m).points_in_world
             }
             Observation::Cloud {
                 cloud,

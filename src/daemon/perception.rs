@@ -126,11 +126,7 @@ impl Perception {
                     Pop::Item(observation) => segmenting
                         .process(shared, observation)
                         .map(|frame| Segmented::Frame(Box::new(frame))),
-                    Pop::TimedOut
-                        if shared.every_stream_ended()
-                            && !segmenting.end_sent
-                            && !shared.end_of_stream_flushed.load(Ordering::Acquire) =>
-                    {
+                    Pop::TimedOut if shared.every_stream_ended() && !segmenting.end_sent => {
                         segmenting.end_sent = true;
                         Some(Segmented::EndOfStream)
                     }

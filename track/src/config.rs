@@ -111,6 +111,15 @@ pub struct TrackConfig {
 }
 
 impl TrackConfig {
+    /// How far behind a fused voxel the nearest measured surface must lie for the camera to
+    /// see through it (`carve_margin_m`, `carve_margin_per_m2`).
+    pub fn carve_margin(&self) -> crate::free_space::DepthMargin {
+        crate::free_space::DepthMargin {
+            margin_m: self.carve_margin_m,
+            per_m2: self.carve_margin_per_m2,
+        }
+    }
+
     /// The fused voxel of an object first seen `range_m` from the sensor: `voxel_size_m`, or
     /// twice the depth noise there (`depth_noise_per_m2`), whichever is larger. Finer voxels
     /// than the noise is thick hold one or two points of a frame each, so that the next

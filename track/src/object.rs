@@ -31,7 +31,7 @@ use tracing::{debug, info};
 
 use crate::change::ChangeTracker;
 use crate::config::TrackConfig;
-use crate::free_space::{DepthMargin, FreeSpace};
+use crate::free_space::FreeSpace;
 use crate::icp::{align_to_grids, CentroidAnchor, IcpFailure, IcpLevel, IcpScratch, IcpSettings};
 
 /// Fraction of a cluster's points that must find the fused surface for a fine-only alignment
@@ -133,6 +133,13 @@ pub struct TrackedObject {
     /// see `ObjectMap::integrate`): carving that takes most of it from an object no cluster
     /// matches any more means the object is gone.
     pub weight_when_seen: f64,
+}
+
+/// An accepted alignment: the new `world_from_object` and how far it is from the current pose.
+struct Judged {
+    estimate: Affine3A,
+    shift_m: f32,
+    turn_rad: f32,
 }
 
 /// An object that has not moved for [`STILL_BEFORE_JUMP`] and whose next alignment moves it
@@ -251,41 +258,14 @@ impl TrackedObject {
                 scratch,
             )
             .and_then(|(object_from_world, inlier_share)| {
-                // A jump of a still object is believed only when the cluster lands on it
-                // almost whole (see `JUMP_M`).
-                let delta = self.object_from_world * object_from_world.inverse();
-                let shift_m = Vec3::from(delta.translation).length();
-                let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
-                let still_for = capture_time.saturating_sub(self.last_pose_change);
-                if still_for >= STILL_BEFORE_JUMP
-                    && (shift_m > JUMP_M || turn_rad > JUMP_RAD)
-                    && inlier_share < FAMILIAR_FRACTION
-                {
-                    Err(IcpFailure::JumpedWhileStill {
-                        shift_mm: 1e3 * shift_m,
-                        turn_deg: turn_rad.to_degrees(),
-                        percent: 100.0 * inlier_share,
-                    })
-                } else {
-                    Ok(object_from_world)
-                }
-            })
-            .and_then(|object_from_world| match free {
-                Some(free) => {
-                    let fraction =
-                        self.seen_through_fraction(free, object_from_world.inverse(), config);
-                    if fraction > SEEN_THROUGH_MAX {
-                        Err(IcpFailure::SeenThrough {
-                            percent: 100.0 * fraction,
-                        })
-                    } else {
-                        Ok(object_from_world)
-                    }
-                }
-                None => Ok(object_from_world),
+                self.judge_alignment(object_from_world, inlier_share, capture_time, free, config)
             });
         let outcome = match aligned {
-            Ok(object_from_world) => {
+            Ok(Judged {
+                estimate,
+                shift_m,
+                turn_rad,
+            }) => {
                 if self.resets_in_a_row > 1 {
                     info!(
                         id = self.id,
@@ -294,10 +274,6 @@ impl TrackedObject {
                     );
                 }
                 self.resets_in_a_row = 0;
-                let estimate = object_from_world.inverse();
-                let delta = self.object_from_world * estimate;
-                let shift_m = Vec3::from(delta.translation).length();
-                let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
                 if shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad {
                     let dt = capture_time.saturating_sub(self.last_pose_change);
                     self.velocity = BodyVelocity::between(&self.world_from_object, &estimate, dt);
@@ -328,6 +304,49 @@ impl TrackedObject {
             config,
         );
         outcome
+    }
+
+    /// Accepts an alignment (`object_from_world`, with `inlier_share` of the cluster on the
+    /// fused surface) or refuses it: a still object that would jump with a cluster only partly
+    /// on it (see [`JUMP_M`]), or a pose that puts much of the fused surface where the camera
+    /// sees through (see [`SEEN_THROUGH_MAX`]). An accepted one comes with its motion from the
+    /// current pose.
+    fn judge_alignment(
+        &self,
+        object_from_world: Affine3A,
+        inlier_share: f32,
+        capture_time: Duration,
+        free: Option<&FreeSpace>,
+        config: &TrackConfig,
+    ) -> Result<Judged, IcpFailure> {
+        let estimate = object_from_world.inverse();
+        let delta = self.object_from_world * estimate;
+        let shift_m = Vec3::from(delta.translation).length();
+        let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
+        let still_for = capture_time.saturating_sub(self.last_pose_change);
+        if still_for >= STILL_BEFORE_JUMP
+            && (shift_m > JUMP_M || turn_rad > JUMP_RAD)
+            && inlier_share < FAMILIAR_FRACTION
+        {
+            return Err(IcpFailure::JumpedWhileStill {
+                shift_mm: 1e3 * shift_m,
+                turn_deg: turn_rad.to_degrees(),
+                percent: 100.0 * inlier_share,
+            });
+        }
+        if let Some(free) = free {
+            let fraction = self.seen_through_fraction(free, estimate, config);
+            if fraction > SEEN_THROUGH_MAX {
+                return Err(IcpFailure::SeenThrough {
+                    percent: 100.0 * fraction,
+                });
+            }
+        }
+        Ok(Judged {
+            estimate,
+            shift_m,
+            turn_rad,
+        })
     }
 
     /// Aligns, cheapest first: the fine level alone from the prediction, kept if nearly all
@@ -568,10 +587,7 @@ impl TrackedObject {
         if config.carve_fraction <= 0.0 {
             return carved;
         }
-        let margin = DepthMargin {
-            margin_m: config.carve_margin_m,
-            per_m2: config.carve_margin_per_m2,
-        };
+        let margin = config.carve_margin();
         let seen_through: Vec<(IVec3, PointMoments)> = self
             .grid
             .iter()
@@ -613,10 +629,7 @@ impl TrackedObject {
         world_from_object: Affine3A,
         config: &TrackConfig,
     ) -> f32 {
-        let margin = DepthMargin {
-            margin_m: config.carve_margin_m,
-            per_m2: config.carve_margin_per_m2,
-        };
+        let margin = config.carve_margin();
         let stride = self.grid.len().div_ceil(SEEN_THROUGH_SAMPLE).max(1);
         let (mut through, mut total) = (0.0f64, 0.0f64);
         for (_, m) in self.grid.iter().step_by(stride) {
