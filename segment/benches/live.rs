@@ -37,6 +37,7 @@ fn time(points: &[Vec3], config: &SegmentConfig, with_hints: bool) -> StageTimes
         voxels: median(|t| t.voxels),
         creases: median(|t| t.creases),
         clusters: median(|t| t.clusters),
+        convexity: median(|t| t.convexity),
     }
 }
 
@@ -44,8 +45,16 @@ fn report(scene: &str, points: &[Vec3], world_from_sensor: glam::Affine3A) {
     let finite = points.iter().filter(|p| p.is_finite()).count();
     println!("{scene}: {finite} finite points");
     println!(
-        "  {:<22} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6}",
-        "config", "planes", "classify", "voxels", "creases", "clusters", "total", "ratio"
+        "  {:<22} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8} {:>6}",
+        "config",
+        "planes",
+        "classify",
+        "voxels",
+        "creases",
+        "clusters",
+        "convexity",
+        "total",
+        "ratio"
     );
     let exact = SegmentConfig::default().seen_from(world_from_sensor);
     let live = SegmentConfig::live().seen_from(world_from_sensor);
@@ -59,12 +68,13 @@ fn report(scene: &str, points: &[Vec3], world_from_sensor: glam::Affine3A) {
         let total = ms(t.total());
         let base = *baseline.get_or_insert(total);
         println!(
-            "  {name:<22} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>6.3}",
+            "  {name:<22} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>9.2} {:>8.2} {:>6.3}",
             ms(t.planes),
             ms(t.classify),
             ms(t.voxels),
             ms(t.creases),
             ms(t.clusters),
+            ms(t.convexity),
             total,
             total / base
         );

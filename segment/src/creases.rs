@@ -18,15 +18,23 @@ use crate::planes::fit_plane;
 /// At most this many neighbours (an even stride through them) fit a point's local plane.
 const MAX_FIT_POINTS: usize = 192;
 
-/// Valley depths in metres of `indices` (ascending, finite points), each from its neighbours
-/// among `indices` within `radius_m`, with the local normal turned towards `viewpoint`; 0 where
-/// the neighbours do not determine a plane. In the order of `indices`.
-pub(crate) fn valley_depths(
+/// The local plane at a point: its unit normal (towards the viewpoint) and how deep the point
+/// lies below it (its valley depth, in metres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LocalPlane {
+    pub(crate) normal: Vec3,
+    pub(crate) valley_depth_m: f32,
+}
+
+/// The local plane of each of `indices` (ascending, finite points), from its neighbours among
+/// `indices` within `radius_m`, with the normal turned towards `viewpoint`; a zero normal and
+/// depth where the neighbours do not determine a plane. In the order of `indices`.
+pub(crate) fn local_planes(
     points: &[Vec3],
     indices: &[u32],
     radius_m: f32,
     viewpoint: Vec3,
-) -> Vec<f32> {
+) -> Vec<LocalPlane> {
     let grid = VoxelGrid::new(points, indices, radius_m);
     let radius_sq = radius_m * radius_m;
     indices
@@ -46,11 +54,21 @@ pub(crate) fn valley_depths(
                 let kept: Vec<u32> = near.iter().step_by(stride).copied().collect();
                 *near = kept;
             }
+            // The valley depth is `(centroid − p)·n` with `n · centroid = d`, `n` towards the
+            // viewpoint.
             match fit_plane(points, near) {
-                // `(centroid − p)·n` with `n · centroid = d`, `n` towards the viewpoint.
-                Some((n, d)) if n.dot(viewpoint - p) < 0.0 => n.dot(p) - d,
-                Some((n, d)) => d - n.dot(p),
-                None => 0.0,
+                Some((n, d)) if n.dot(viewpoint - p) < 0.0 => LocalPlane {
+                    normal: -n,
+                    valley_depth_m: n.dot(p) - d,
+                },
+                Some((n, d)) => LocalPlane {
+                    normal: n,
+                    valley_depth_m: d - n.dot(p),
+                },
+                None => LocalPlane {
+                    normal: Vec3::ZERO,
+                    valley_depth_m: 0.0,
+                },
             }
         })
         .collect()

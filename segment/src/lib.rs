@@ -8,8 +8,11 @@
 //! - [`segment_with_hints`]: the same, starting from known planes (the previous frame's), which
 //!   skips the RANSAC search while they still fit; [`segment_timed`] also returns
 //!   [`StageTimes`].
-//! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream.
-//! - [`segment_cloud`]: the same for a [`PointCloud`].
+//! - [`segment_cloud`]: [`segment`] for a [`PointCloud`].
+//! - [`segment_organised`]: an organised cloud (a depth image) segmented on every 2nd or
+//!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path.
+//! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
+//!   --objects`'.
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
 //! - [`grid::VoxelGrid`]: the voxel hash grid the stages search neighbours in, for other
 //!   neighbour queries over a cloud (the offline pipeline's point-spacing estimate).
@@ -28,10 +31,16 @@
 //!    creases, where one object stands on or leans against another, are set aside.
 //! 5. `clusters.rs`: Euclidean clustering of the rest on a voxel hash grid, clusters outside a
 //!    size range dropped; then each set-aside point joins the object of its nearest neighbour.
+//! 6. `scene.rs`: clusters that are background (walls, furniture, slices of far depth,
+//!    strips of floor) dropped.
+//! 7. `convexity.rs`, on the cells (stage 3 on): each cluster split where its surface folds
+//!    concavely into touching or stacked objects (LCCP on surface patches).
 
 mod clusters;
+mod convexity;
 mod creases;
 pub mod grid;
+mod organised;
 mod planes;
 mod range;
 mod scene;
@@ -43,6 +52,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tacmesh_source::PointCloud;
 
+pub use organised::{segment_organised, OrganisedSegmentation};
 pub use planes::SupportPlane;
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
@@ -120,6 +130,16 @@ pub struct SegmentConfig {
     /// test and clustering run on the cells' centroids and each point takes its cell's object
     /// (plane membership stays per point). Zero (the default) works point by point.
     pub voxel_size_m: f32,
+    /// Size of the surface patches whose convexity splits touching objects, in metres (see
+    /// the `convexity` module); it grows with the voxel cells far away. Zero turns the split
+    /// off; it also needs `voxel_size_m` > 0 (it works on the cells). Default 0.03: a patch
+    /// is flat enough to have one normal on a 10 cm object, and large enough that Kinect
+    /// noise does not turn its normal.
+    pub patch_size_m: f32,
+    /// A concave connection between two patches whose normals differ by less than this, in
+    /// degrees, is noise on a smooth surface, not a crease between objects. Default 20: on
+    /// the mOSD scans 10 (LCCP's default) cut boxes on their faces, 20–30 scored alike.
+    pub concave_tolerance_deg: f32,
 }
 
 impl Default for SegmentConfig {
@@ -144,18 +164,23 @@ impl Default for SegmentConfig {
             seed: 0,
             plane_sample_points: usize::MAX,
             voxel_size_m: 0.0,
+            patch_size_m: 0.03,
+            concave_tolerance_deg: 20.0,
         }
     }
 }
 
 impl SegmentConfig {
     /// The daemon's settings for a live depth stream (a 640×480 frame every 33 ms on one
-    /// core): the defaults, except planes fitted on 20 000 sampled points, object candidates
-    /// downsampled to 8 mm voxels, and a thinner plane band (8 mm + 6 mm margin instead of
-    /// 12 + 15 mm) so that low objects keep their bottoms (the simulated tabletop's torus is
-    /// 4 cm tall). On the mOSD scans this scores better than the defaults (see
-    /// `tests/real_data.rs`); 7–8 mm voxels were as good as 5 mm there, 5 mm cost 3× more
-    /// in the crease test. For world-frame points, place the sensor with
+    /// core), which `tacmesh mesh --objects` uses too: the defaults, except planes fitted on
+    /// 20 000 sampled points, object candidates downsampled to 8 mm voxels (on which the
+    /// convexity split works), a thinner plane band (8 mm + 6 mm margin instead of 12 + 15 mm)
+    /// so that low objects keep their bottoms (the simulated tabletop's torus is 4 cm tall),
+    /// and a valley depth of 1.2 mm for the crease test on the cells' centroids (1.0 mm, the
+    /// point-wise setting, cut PCL's stereo mug at its rim; 1.5 mm merged mOSD test45's flat
+    /// box with the box it lies on). On the mOSD scans this scores 0.92 mean IoU against the
+    /// defaults' 0.65 (see `tests/real_data.rs`); 7–8 mm voxels were as good as 5 mm there,
+    /// 5 mm cost 3× more in the crease test. For world-frame points, place the sensor with
     /// [`SegmentConfig::seen_from`], and pass the previous frame's planes
     /// ([`Segmentation::plane_hints`]) to [`segment_with_hints`], which skips RANSAC
     /// (`cargo bench -p tacmesh-segment` prints the stage times).
@@ -165,6 +190,7 @@ impl SegmentConfig {
             plane_margin_m: 0.006,
             plane_sample_points: 20_000,
             voxel_size_m: 0.008,
+            max_valley_depth_m: 0.0012,
             ..Self::default()
         }
     }
@@ -242,14 +268,16 @@ pub struct StageTimes {
     pub voxels: Duration,
     /// The crease test (zero if off).
     pub creases: Duration,
-    /// Euclidean clustering, creases joining their objects, labels.
+    /// Euclidean clustering, creases joining their objects, background clusters, labels.
     pub clusters: Duration,
+    /// Clusters split at their concave creases (zero if off).
+    pub convexity: Duration,
 }
 
 impl StageTimes {
     /// The sum of the stages.
     pub fn total(&self) -> Duration {
-        self.planes + self.classify + self.voxels + self.creases + self.clusters
+        self.planes + self.classify + self.voxels + self.creases + self.clusters + self.convexity
     }
 }
 
@@ -329,62 +357,90 @@ pub fn segment_timed(
     let candidates = classify(points, &finite, &mut planes, &mut background, config);
     times.classify = clock.elapsed();
 
-    let objects = if config.voxel_size_m > 0.0 && config.voxel_size_m.is_finite() {
-        // Creases and clusters on the cells' centroids; each point takes its cell's object.
-        let clock = Instant::now();
-        let cells = voxels::voxel_cells(
-            points,
-            &candidates,
-            config.voxel_size_m,
-            &cluster_reach(config),
-        );
-        let all_cells: Vec<u32> = (0..cells.counts.len() as u32).collect();
-        times.voxels = clock.elapsed();
-        let cell_objects = find_objects(
-            &cells.centroids,
-            &all_cells,
-            &cells.counts,
-            config,
-            &mut times,
-        );
-        let clock = Instant::now();
-        let mut object_of_cell = vec![u32::MAX; cells.counts.len()];
-        for (k, object) in cell_objects.iter().enumerate() {
-            for &c in object {
-                object_of_cell[c as usize] = k as u32;
+    let background_of = |object: &[u32]| {
+        scene::background_cluster(points, object, &planes, &background, &band, config)
+    };
+    let (objects, background_clusters) =
+        if config.voxel_size_m > 0.0 && config.voxel_size_m.is_finite() {
+            // Creases and clusters on the cells' centroids; each point takes its cell's object.
+            let clock = Instant::now();
+            let coarsen = cluster_reach(config);
+            let cells = voxels::voxel_cells(points, &candidates, config.voxel_size_m, &coarsen);
+            let all_cells: Vec<u32> = (0..cells.counts.len() as u32).collect();
+            times.voxels = clock.elapsed();
+            let params = convexity_params(config);
+            let (cell_objects, normals) = find_objects(
+                &cells.centroids,
+                &all_cells,
+                &cells.counts,
+                config,
+                params.enabled(),
+                &mut times,
+            );
+            let clock = Instant::now();
+            let points_of_cell = voxels::points_of_cells(&cells, &candidates);
+            let to_points = |cell_list: &[u32]| -> Vec<u32> {
+                let mut object: Vec<u32> = cell_list
+                    .iter()
+                    .flat_map(|&c| points_of_cell.of(c))
+                    .copied()
+                    .collect();
+                object.sort_unstable();
+                object
+            };
+            let mut objects = Vec::with_capacity(cell_objects.len());
+            let mut dropped = 0;
+            for cell_list in &cell_objects {
+                if background_of(&to_points(cell_list)).is_some() {
+                    dropped += 1;
+                    continue;
+                }
+                objects.push(cell_list);
             }
-        }
-        let mut objects: Vec<Vec<u32>> = cell_objects
-            .iter()
-            .map(|object| {
-                Vec::with_capacity(
-                    object
+            times.clusters += clock.elapsed();
+            // Touching objects: each cluster split where its surface folds concavely.
+            let clock = Instant::now();
+            let cell_m = |p: Vec3| config.voxel_size_m * (1u32 << coarsen.band(p)) as f32;
+            let link_m = |p: Vec3, q: Vec3| coarsen.at(p).max(coarsen.at(q));
+            let pieces: Vec<Vec<u32>> = objects
+                .par_iter()
+                .flat_map_iter(|cell_list| {
+                    convexity::split_at_concave_creases(
+                        &cells.centroids,
+                        &cells.counts,
+                        &normals,
+                        cell_list,
+                        &params,
+                        cell_m,
+                        link_m,
+                    )
+                })
+                .filter(|piece| {
+                    piece
                         .iter()
                         .map(|&c| cells.counts[c as usize] as usize)
-                        .sum(),
-                )
-            })
-            .collect();
-        for (&i, &c) in candidates.iter().zip(&cells.cell_of) {
-            if let Some(object) = objects.get_mut(object_of_cell[c as usize] as usize) {
-                object.push(i);
-            }
-        }
-        times.clusters += clock.elapsed();
-        objects
-    } else {
-        find_objects(points, &candidates, &[], config, &mut times)
-    };
+                        .sum::<usize>()
+                        >= config.min_cluster_points.max(1)
+                })
+                .map(|piece| to_points(&piece))
+                .collect();
+            times.convexity = clock.elapsed();
+            (pieces, dropped)
+        } else {
+            let (objects, _) = find_objects(points, &candidates, &[], config, false, &mut times);
+            let clock = Instant::now();
+            let before = objects.len();
+            let objects: Vec<Vec<u32>> = objects
+                .into_iter()
+                .filter(|object| background_of(object).is_none())
+                .collect();
+            times.clusters += clock.elapsed();
+            let dropped = before - objects.len();
+            (objects, dropped)
+        };
 
     let clock = Instant::now();
-    let before = objects.len();
-    let mut objects: Vec<Vec<u32>> = objects
-        .into_iter()
-        .filter(|object| {
-            scene::background_cluster(points, object, &planes, &background, &band, config).is_none()
-        })
-        .collect();
-    let background_clusters = before - objects.len();
+    let mut objects = objects;
     objects.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
     let mut labels = vec![0u32; points.len()];
     for (k, object) in objects.iter().enumerate() {
@@ -423,6 +479,16 @@ fn cluster_reach(config: &SegmentConfig) -> range::RangeDistance {
         1.5,
         config.viewpoint_m,
     )
+}
+
+/// The convexity split's settings from the config, for points seen from its viewpoint.
+fn convexity_params(config: &SegmentConfig) -> convexity::ConvexityParams {
+    convexity::ConvexityParams {
+        patch_m: config.patch_size_m,
+        concave_tolerance_deg: config.concave_tolerance_deg,
+        min_piece_weight: config.min_cluster_points,
+        viewpoint: config.viewpoint_m,
+    }
 }
 
 /// Stage 2: assigns each finite point to the first support it lies within its band of
@@ -495,32 +561,37 @@ fn classify(
     candidates
 }
 
-/// Stages 3 and 4 on `indices` into `points` (each standing for `weights[i]` input points, or
+/// Stages 4 and 5 on `indices` into `points` (each standing for `weights[i]` input points, or
 /// one if `weights` is empty): the crease test, Euclidean clustering of the points outside
-/// creases, then crease points joining their nearest object. Objects in no particular order.
+/// creases, then crease points joining their nearest object. Returns the objects (in no
+/// particular order) and, if the crease test ran or `need_normals` asks for them, each
+/// point's local normal (in the order of `indices`; zero where undetermined).
 fn find_objects(
     points: &[Vec3],
     indices: &[u32],
     weights: &[u32],
     config: &SegmentConfig,
+    need_normals: bool,
     times: &mut StageTimes,
-) -> Vec<Vec<u32>> {
+) -> (Vec<Vec<u32>>, Vec<Vec3>) {
     // Concave creases: points deeper than `max_valley_depth_m` below their local plane do not
     // link clusters; afterwards each joins the object of its nearest linked neighbour.
     let clock = Instant::now();
     let use_creases = config.crease_radius_m > 0.0
         && config.crease_radius_m.is_finite()
         && config.max_valley_depth_m < f32::INFINITY;
-    let depths = if use_creases {
-        creases::valley_depths(points, indices, config.crease_radius_m, config.viewpoint_m)
+    let planes = if use_creases || need_normals {
+        creases::local_planes(points, indices, config.crease_radius_m, config.viewpoint_m)
     } else {
         Vec::new()
     };
     let mut core = Vec::with_capacity(indices.len());
     let mut valley: Vec<u32> = Vec::new();
     for (k, &i) in indices.iter().enumerate() {
-        match depths.get(k) {
-            Some(&depth_m) if depth_m > config.max_valley_depth_m => valley.push(i),
+        match planes.get(k) {
+            Some(plane) if use_creases && plane.valley_depth_m > config.max_valley_depth_m => {
+                valley.push(i)
+            }
             _ => core.push(i),
         }
     }
@@ -544,7 +615,8 @@ fn find_objects(
         }
     }
     times.clusters += clock.elapsed();
-    objects
+    let normals = planes.into_iter().map(|plane| plane.normal).collect();
+    (objects, normals)
 }
 
 /// Adds each of `loose` to the object of its nearest object point within `tolerance_m`,

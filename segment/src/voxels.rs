@@ -77,6 +77,37 @@ pub(crate) fn voxel_cells(
     }
 }
 
+/// The points of each cell: `of(c)` lists the input indices in cell `c`, ascending.
+pub(crate) struct PointsOfCells {
+    start: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl PointsOfCells {
+    pub(crate) fn of(&self, cell: u32) -> &[u32] {
+        &self.members[self.start[cell as usize] as usize..self.start[cell as usize + 1] as usize]
+    }
+}
+
+/// Groups `indices` (the input of [`voxel_cells`], ascending) by their cell.
+pub(crate) fn points_of_cells(cells: &Cells, indices: &[u32]) -> PointsOfCells {
+    // Counting sort by cell keeps each cell's points ascending.
+    let mut start = vec![0u32; cells.counts.len() + 1];
+    for &c in &cells.cell_of {
+        start[c as usize + 1] += 1;
+    }
+    for k in 0..cells.counts.len() {
+        start[k + 1] += start[k];
+    }
+    let mut fill = start.clone();
+    let mut members = vec![0u32; indices.len()];
+    for (&i, &c) in indices.iter().zip(&cells.cell_of) {
+        members[fill[c as usize] as usize] = i;
+        fill[c as usize] += 1;
+    }
+    PointsOfCells { start, members }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

