@@ -131,10 +131,11 @@ pub struct SegmentConfig {
     /// (plane membership stays per point). Zero (the default) works point by point.
     pub voxel_size_m: f32,
     /// Size of the surface patches whose convexity splits touching objects, in metres (see
-    /// the `convexity` module); it grows with the voxel cells far away. Zero turns the split
-    /// off; it also needs `voxel_size_m` > 0 (it works on the cells). Default 0.03: a patch
-    /// is flat enough to have one normal on a 10 cm object, and large enough that Kinect
-    /// noise does not turn its normal.
+    /// the `convexity` module); far away it grows to three cells and eight depth steps
+    /// (`range_step_per_m2`) across, so that noise does not decide a patch's normal. Zero
+    /// turns the split off; it also needs `voxel_size_m` > 0 (it works on the cells).
+    /// Default 0.03: a patch is flat enough to have one normal on a 10 cm object, and large
+    /// enough that Kinect noise at up to 1 m does not turn its normal.
     pub patch_size_m: f32,
     /// A concave connection between two patches whose normals differ by less than this, in
     /// degrees, is noise on a smooth surface, not a crease between objects. Default 20: on
@@ -488,6 +489,7 @@ fn convexity_params(config: &SegmentConfig) -> convexity::ConvexityParams {
         concave_tolerance_deg: config.concave_tolerance_deg,
         min_piece_weight: config.min_cluster_points,
         viewpoint: config.viewpoint_m,
+        range_step_per_m2: config.range_step_per_m2,
     }
 }
 
