@@ -1,13 +1,17 @@
 //! A sequence of recorded point clouds as a [`DepthSource`].
 //!
 //! Entry points: [`CloudSequence::new`] over an explicit list, [`CloudSequence::from_directory`];
-//! configured by [`CloudSequenceConfig`]. Files are read by `tacmesh_formats::read_cloud`
-//! (PLY, PCD, XYZ), which drops non-finite points.
+//! configured by [`CloudSequenceConfig`]. Files are read by `tacmesh_formats::read_cloud_file`
+//! (PLY, PCD, XYZ). An organised file (a PCD with `HEIGHT` > 1) plays organised: every point
+//! stays at its pixel, non-finite ones included, and the observation carries its
+//! [`CloudGrid`], so that the daemon segments it as it does a depth image. From any other file
+//! the non-finite points are dropped.
 
 use std::path::{Path, PathBuf};
 
 use glam::Affine3A;
-use tacmesh_source::{monotonic_now, DepthSource, Observation, SourceError};
+use tacmesh_formats::{read_cloud_file, NonFinite};
+use tacmesh_source::{monotonic_now, CloudGrid, DepthSource, Observation, PointCloud, SourceError};
 
 use crate::listing::list_clouds;
 use crate::pacing::{Pacer, Pacing, Playhead};
@@ -34,7 +38,8 @@ impl Default for CloudSequenceConfig {
     }
 }
 
-/// Recorded point clouds replayed as [`Observation::Cloud`] stamped with [`monotonic_now`].
+/// Recorded point clouds replayed as [`Observation::Cloud`] stamped with [`monotonic_now`],
+/// organised (with their [`CloudGrid`]) when the file is.
 ///
 /// A file that cannot be read is reported as [`SourceError::Malformed`]; the next call goes on
 /// with the next file.
@@ -99,21 +104,103 @@ impl DepthSource for CloudSequence {
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
         let index = self.playhead.advance(&mut self.pacer, &self.name)?;
         let path = &self.files[index];
-        let cloud = tacmesh_formats::read_cloud(path).map_err(|e| SourceError::Malformed {
+        let (cloud, grid) = read_frame(path).map_err(|e| SourceError::Malformed {
             device: self.name.clone(),
             reason: e.to_string(),
         })?;
         self.pacer.wait(None);
         tracing::trace!(
-            "{}: {} points from {}",
+            "{}: {} points from {}{}",
             self.name,
             cloud.len(),
-            path.display()
+            path.display(),
+            grid.map_or(String::new(), |g| format!(
+                " (organised, {}x{})",
+                g.width, g.height
+            ))
         );
         Ok(Observation::Cloud {
             cloud,
+            grid,
             world_from_sensor: self.config.world_from_sensor,
             capture_time: monotonic_now(),
         })
+    }
+}
+
+/// One file's cloud: organised with its grid when the file is (non-finite points in place),
+/// else its finite points.
+fn read_frame(
+    path: &Path,
+) -> Result<(PointCloud, Option<CloudGrid>), tacmesh_formats::FormatError> {
+    let mut file = read_cloud_file(path, NonFinite::Keep)?;
+    if file.grid.is_none() && file.non_finite > 0 {
+        file.cloud.retain_finite();
+        tracing::debug!(
+            "{}: dropped {} points with a NaN or infinite coordinate",
+            path.display(),
+            file.non_finite
+        );
+    }
+    Ok((file.cloud, file.grid))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// A PCD of `width` x `height` points, `nan` in the second.
+    fn pcd(width: u32, height: u32) -> String {
+        let points = width * height;
+        let mut text = format!(
+            "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH {width}\nHEIGHT {height}\n\
+             POINTS {points}\nDATA ascii\n"
+        );
+        for i in 0..points {
+            text += &if i == 1 {
+                "nan nan nan\n".to_owned()
+            } else {
+                format!("{i} 0 1\n")
+            };
+        }
+        text
+    }
+
+    fn play_one(file_name: &str, contents: &str) -> (PointCloud, Option<CloudGrid>) {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join(file_name);
+        std::fs::write(&path, contents).expect("write");
+        let mut source =
+            CloudSequence::new("t", vec![path], CloudSequenceConfig::default()).expect("sequence");
+        match source.next_observation().expect("a cloud") {
+            Observation::Cloud { cloud, grid, .. } => (cloud, grid),
+            other => panic!("expected a cloud, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn organised_pcd_replays_organised_with_nans_in_place() {
+        let (cloud, grid) = play_one("organised.pcd", &pcd(2, 2));
+        assert_eq!(
+            grid,
+            Some(CloudGrid {
+                width: 2,
+                height: 2
+            })
+        );
+        assert_eq!(cloud.len(), 4);
+        assert!(cloud.points[1].is_nan());
+        assert_eq!(cloud.points[3], Vec3::new(3.0, 0.0, 1.0));
+    }
+
+    #[test]
+    fn unorganised_clouds_replay_as_their_finite_points() {
+        let (cloud, grid) = play_one("row.pcd", &pcd(4, 1));
+        assert_eq!(grid, None);
+        assert_eq!(cloud.points.len(), 3);
+        assert!(cloud.points.iter().all(|p| p.is_finite()));
+        let (cloud, grid) = play_one("scan.xyz", "0 0 1\nnan 0 1\n2 0 1\n");
+        assert_eq!((cloud.len(), grid), (2, None));
     }
 }

@@ -6,7 +6,9 @@
 //! - [`ImageSequence`]: depth images (16-bit PNG, TIFF, PGM, raw Z16) as
 //!   [`Observation::Depth`](tacmesh_source::Observation::Depth) frames.
 //! - [`CloudSequence`]: PLY/PCD/XYZ files as
-//!   [`Observation::Cloud`](tacmesh_source::Observation::Cloud).
+//!   [`Observation::Cloud`](tacmesh_source::Observation::Cloud); an organised PCD (one with
+//!   `HEIGHT` > 1) plays organised, with its [`CloudGrid`](tacmesh_source::CloudGrid) and its
+//!   non-finite points in place, so that the daemon segments it as it does a depth image.
 //! - [`decode`]: the pure depth image decoders ([`read_depth_image`] and one per format).
 //! - [`list_depth_images`], [`read_association_file`], [`read_pose_file`]: which files play,
 //!   with which timestamps and poses.
