@@ -450,6 +450,7 @@ fn cloud_sequence_plays_clouds_with_the_configured_pose_at_a_fixed_rate() {
         pacing: Pacing::Fixed { fps: 20.0 },
         looping: true,
         world_from_sensor: pose,
+        ..CloudSequenceConfig::default()
     };
     let mut source = CloudSequence::new(
         "milk",
