@@ -3,7 +3,8 @@
 //! Entry points, each choosing the format by the file's extension:
 //! - [`read_cloud_file`]: `.ply`, `.pcd`, `.xyz`/`.txt`/`.pts` to a [`CloudFile`]: the points,
 //!   how many had a NaN or infinite coordinate (dropped or kept, one rule for every format),
-//!   and the sensor pose when the file records one. [`read_cloud`] is its finite points.
+//!   the sensor pose when the file records one, and the pixel grid of an organised PCD.
+//!   [`read_cloud`] is its finite points.
 //! - [`read_mesh`]: `.obj`, `.ply` to a [`TriMesh`] (polygons fan-triangulated).
 //! - [`write_cloud`]: `.ply` (binary little-endian) or `.xyz` (text).
 //! - [`write_mesh`]: `.ply` (binary little-endian) or `.obj` (text).
@@ -25,7 +26,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use glam::Affine3A;
-use tacmesh_source::{PointCloud, TriMesh};
+use tacmesh_source::{CloudGrid, PointCloud, TriMesh};
 
 /// Why a file could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -87,6 +88,10 @@ pub struct CloudFile {
     /// The sensor's pose in the cloud's frame, when the file records one (PCD `VIEWPOINT`);
     /// its translation is where the scan was seen from.
     pub cloud_from_sensor: Option<Affine3A>,
+    /// The pixel grid of an organised file (a PCD with `HEIGHT` > 1), when `cloud` still lies
+    /// on it: non-finite points kept, or none to drop. `None` for unorganised files and for an
+    /// organised one whose non-finite points were dropped.
+    pub grid: Option<CloudGrid>,
 }
 
 /// Reads a point cloud, choosing the format by extension: `.ply`, `.pcd`, or `.xyz` (also
@@ -96,14 +101,19 @@ pub struct CloudFile {
 pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, FormatError> {
     let name = path.display().to_string();
     // Only PCD records a sensor pose; PLY and XYZ have no standard place for one.
-    let (mut cloud, cloud_from_sensor) = match extension(path).as_str() {
-        "ply" => (ply::parse_cloud(&read_bytes(path)?, &name)?, None),
+    // Only PCD is organised: its parser has checked that WIDTH * HEIGHT is the point count.
+    let (mut cloud, cloud_from_sensor, grid) = match extension(path).as_str() {
+        "ply" => (ply::parse_cloud(&read_bytes(path)?, &name)?, None, None),
         "pcd" => {
             let pcd = pcd::parse(&read_bytes(path)?, &name)?;
             let pose = pcd.cloud_from_sensor;
-            (pcd.into_cloud(), pose)
+            let grid = (pcd.height > 1).then_some(CloudGrid {
+                width: pcd.width,
+                height: pcd.height,
+            });
+            (pcd.into_cloud(), pose, grid)
         }
-        "xyz" | "txt" | "pts" => (xyz::parse(&read_bytes(path)?, &name)?, None),
+        "xyz" | "txt" | "pts" => (xyz::parse(&read_bytes(path)?, &name)?, None, None),
         _ => {
             return Err(FormatError::UnsupportedExtension {
                 name,
@@ -116,10 +126,12 @@ pub fn read_cloud_file(path: &Path, non_finite: NonFinite) -> Result<CloudFile, 
         NonFinite::Drop => cloud.retain_finite(),
         NonFinite::Keep => cloud.points.iter().filter(|p| !p.is_finite()).count(),
     };
+    let on_grid = non_finite == NonFinite::Keep || count == 0;
     Ok(CloudFile {
         cloud,
         non_finite: count,
         cloud_from_sensor,
+        grid: grid.filter(|_| on_grid),
     })
 }
 

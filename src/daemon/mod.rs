@@ -549,6 +549,7 @@ mod tests {
     fn cloud() -> Result<Observation, SourceError> {
         Ok(Observation::Cloud {
             cloud: PointCloud::new(vec![glam::Vec3::ZERO]),
+            grid: None,
             world_from_sensor: glam::Affine3A::IDENTITY,
             capture_time: Duration::ZERO,
         })

@@ -215,15 +215,30 @@ impl Segmenting {
             }
             Observation::Cloud {
                 cloud,
+                grid,
                 world_from_sensor,
                 capture_time,
             } => {
-                let points = cloud
+                // An organised cloud (a recorded organised PCD) is a depth image already
+                // deprojected: it takes the strided path below as a depth frame does.
+                if let Some(grid) = grid {
+                    if let Err(err) = grid.check(&cloud) {
+                        self.malformed(shared, &err);
+                        return None;
+                    }
+                }
+                self.malformed_logged = false;
+                let points: Vec<Vec3> = cloud
                     .points
                     .iter()
                     .map(|&p| world_from_sensor.transform_point3(p))
                     .collect();
-                (points, None, capture_time, world_from_sensor)
+                if grid.is_some() {
+                    let missing = points.iter().filter(|p| !p.is_finite()).count();
+                    Counters::add(&counters.invalid_pixels, missing as u64);
+                }
+                let organised = grid.map(|g| (g.width, g.height));
+                (points, organised, capture_time, world_from_sensor)
             }
         };
         let viewpoint = Vec3::from(world_from_sensor.translation);

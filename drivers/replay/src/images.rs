@@ -10,7 +10,8 @@ use tacmesh_source::{
     monotonic_now, DepthFrame, DepthSource, Intrinsics, Observation, SourceError,
 };
 
-use crate::decode::{read_depth_image, DepthImage, Z16Layout};
+use crate::cache::{FrameCache, DEFAULT_LOOP_CACHE_BYTES};
+use crate::decode::{read_depth_image, DecodeError, Z16Layout};
 use crate::listing::{list_depth_images, read_association_file, DepthFile};
 use crate::pacing::{Pacer, Pacing, Playhead};
 use crate::ReplayError;
@@ -32,10 +33,15 @@ pub struct ImageSequenceConfig {
     pub poses: Option<Vec<Affine3A>>,
     /// Layout of `.z16`/`.raw` frames; `None` reads it from each file name.
     pub z16_layout: Option<Z16Layout>,
+    /// When looping, decoded frames (depth in metres) are kept in memory up to this many
+    /// bytes, so that later passes copy them instead of decoding their files again (see
+    /// [`DEFAULT_LOOP_CACHE_BYTES`]).
+    pub loop_cache_bytes: usize,
 }
 
 impl ImageSequenceConfig {
-    /// Identity pose, as fast as possible, no looping, no per-frame poses.
+    /// Identity pose, as fast as possible, no looping, no per-frame poses, a 64 MiB loop
+    /// cache.
     pub fn new(intrinsics: Intrinsics, depth_scale_m: f32) -> Self {
         Self {
             intrinsics,
@@ -45,6 +51,7 @@ impl ImageSequenceConfig {
             world_from_sensor: Affine3A::IDENTITY,
             poses: None,
             z16_layout: None,
+            loop_cache_bytes: DEFAULT_LOOP_CACHE_BYTES,
         }
     }
 }
@@ -53,7 +60,8 @@ impl ImageSequenceConfig {
 /// [`monotonic_now`] when handed out.
 ///
 /// A frame that cannot be read (missing, corrupt, wrong size) is reported as
-/// [`SourceError::Malformed`]; the next call goes on with the next frame.
+/// [`SourceError::Malformed`] (on every pass); the next call goes on with the next frame. A
+/// looping sequence keeps its decoded frames, within [`ImageSequenceConfig::loop_cache_bytes`].
 #[derive(Debug)]
 pub struct ImageSequence {
     name: String,
@@ -61,6 +69,8 @@ pub struct ImageSequence {
     config: ImageSequenceConfig,
     playhead: Playhead,
     pacer: Pacer,
+    /// Each frame's depth in metres.
+    decoded: FrameCache<Vec<f32>>,
 }
 
 impl ImageSequence {
@@ -101,12 +111,19 @@ impl ImageSequence {
         })?;
         let pacer = Pacer::new(config.pacing);
         let playhead = Playhead::new(files.len(), config.looping);
+        let cache_bytes = if config.looping {
+            config.loop_cache_bytes
+        } else {
+            0
+        };
+        let decoded = FrameCache::new(files.len(), cache_bytes);
         Ok(Self {
             playhead,
             name,
             files,
             config,
             pacer,
+            decoded,
         })
     }
 
@@ -136,28 +153,38 @@ impl ImageSequence {
     pub fn files(&self) -> &[DepthFile] {
         &self.files
     }
+}
 
-    fn malformed(&self, reason: String) -> SourceError {
-        SourceError::Malformed {
-            device: self.name.clone(),
-            reason,
-        }
-    }
+/// Why a frame of the sequence is malformed.
+#[derive(Debug, thiserror::Error)]
+enum BadFrame {
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    #[error("{name} is {found_width}x{found_height}, but the sequence is configured for {width}x{height}")]
+    WrongSize {
+        name: String,
+        found_width: u32,
+        found_height: u32,
+        width: u32,
+        height: u32,
+    },
+}
 
-    /// Checks the decoded image against the intrinsics and scales it to metres.
-    fn depth_m(&self, file: &DepthFile, image: DepthImage) -> Result<Vec<f32>, SourceError> {
-        let Intrinsics { width, height, .. } = self.config.intrinsics;
-        if (image.width, image.height) != (width, height) {
-            return Err(self.malformed(format!(
-                "{} is {}x{}, but the sequence is configured for {width}x{height}",
-                file.path.display(),
-                image.width,
-                image.height
-            )));
-        }
-        let scale = self.config.depth_scale_m;
-        Ok(image.depth.iter().map(|&d| f32::from(d) * scale).collect())
+/// Reads and decodes a frame, checks it against the intrinsics and scales it to metres.
+fn read_depth_m(file: &DepthFile, config: &ImageSequenceConfig) -> Result<Vec<f32>, BadFrame> {
+    let image = read_depth_image(&file.path, config.z16_layout)?;
+    let Intrinsics { width, height, .. } = config.intrinsics;
+    if (image.width, image.height) != (width, height) {
+        return Err(BadFrame::WrongSize {
+            name: file.path.display().to_string(),
+            found_width: image.width,
+            found_height: image.height,
+            width,
+            height,
+        });
     }
+    let scale = config.depth_scale_m;
+    Ok(image.depth.iter().map(|&d| f32::from(d) * scale).collect())
 }
 
 impl DepthSource for ImageSequence {
@@ -168,9 +195,14 @@ impl DepthSource for ImageSequence {
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
         let index = self.playhead.advance(&mut self.pacer, &self.name)?;
         let file = &self.files[index];
-        let image = read_depth_image(&file.path, self.config.z16_layout)
-            .map_err(|e| self.malformed(e.to_string()))?;
-        let depth_m = self.depth_m(file, image)?;
+        let config = &self.config;
+        let depth_m = self
+            .decoded
+            .get_or_decode(index, &self.name, || read_depth_m(file, config))
+            .map_err(|e| SourceError::Malformed {
+                device: self.name.clone(),
+                reason: e.to_string(),
+            })?;
         let pose = self
             .config
             .poses
@@ -184,5 +216,85 @@ impl DepthSource for ImageSequence {
             world_from_sensor: self.config.world_from_sensor * pose,
             capture_time: monotonic_now(),
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16-bit PGM of one row.
+    fn pgm(depth: &[u16]) -> Vec<u8> {
+        let mut bytes = format!("P5 {} 1 65535\n", depth.len()).into_bytes();
+        for d in depth {
+            bytes.extend(d.to_be_bytes());
+        }
+        bytes
+    }
+
+    fn looping(width: u32, loop_cache_bytes: usize) -> ImageSequenceConfig {
+        let intrinsics = Intrinsics {
+            width,
+            height: 1,
+            fx: 1.0,
+            fy: 1.0,
+            cx: 0.0,
+            cy: 0.0,
+        };
+        ImageSequenceConfig {
+            looping: true,
+            loop_cache_bytes,
+            ..ImageSequenceConfig::new(intrinsics, 1.0)
+        }
+    }
+
+    /// The depth of `n` calls, or the error's text.
+    fn play(source: &mut ImageSequence, n: usize) -> Vec<Result<Vec<f32>, String>> {
+        (0..n)
+            .map(|_| match source.next_observation() {
+                Ok(Observation::Depth(frame)) => Ok(frame.depth_m),
+                Ok(other) => panic!("expected a depth frame, got {other:?}"),
+                Err(err) => Err(err.to_string()),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_looped_replay_plays_kept_frames_again_and_reads_the_rest() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let paths = [dir.path().join("0.pgm"), dir.path().join("1.pgm")];
+        std::fs::write(&paths[0], pgm(&[1, 2])).expect("write");
+        std::fs::write(&paths[1], pgm(&[3, 0])).expect("write");
+        let files = paths.iter().map(DepthFile::new).collect();
+        // A frame is two f32: room for the first only.
+        let mut source = ImageSequence::new("t", files, looping(2, 12)).expect("sequence");
+        let first = play(&mut source, 2);
+        assert_eq!(first, [Ok(vec![1.0, 2.0]), Ok(vec![3.0, 0.0])]);
+        assert_eq!(source.decoded.kept(), 1);
+        std::fs::write(&paths[0], pgm(&[9, 9])).expect("rewrite");
+        std::fs::write(&paths[1], pgm(&[4, 4])).expect("rewrite");
+        // The kept frame is the same; the one past the budget is read again.
+        assert_eq!(
+            play(&mut source, 2),
+            [Ok(vec![1.0, 2.0]), Ok(vec![4.0, 4.0])]
+        );
+    }
+
+    #[test]
+    fn a_bad_frame_in_a_looped_replay_is_an_error_on_every_pass() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let good = dir.path().join("good.pgm");
+        let wide = dir.path().join("wide.pgm");
+        std::fs::write(&good, pgm(&[1, 2])).expect("write");
+        std::fs::write(&wide, pgm(&[1, 2, 3])).expect("write");
+        let files = vec![DepthFile::new(good), DepthFile::new(wide)];
+        let mut source = ImageSequence::new("t", files, looping(2, 1 << 20)).expect("sequence");
+        for _pass in 0..3 {
+            let played = play(&mut source, 2);
+            assert_eq!(played[0], Ok(vec![1.0, 2.0]));
+            let err = played[1].as_ref().expect_err("wide.pgm is the wrong size");
+            assert!(err.contains("wide.pgm is 3x1"), "{err}");
+        }
+        assert_eq!(source.decoded.kept(), 1);
     }
 }

@@ -6,7 +6,9 @@
 //! - [`ImageSequence`]: depth images (16-bit PNG, TIFF, PGM, raw Z16) as
 //!   [`Observation::Depth`](tacmesh_source::Observation::Depth) frames.
 //! - [`CloudSequence`]: PLY/PCD/XYZ files as
-//!   [`Observation::Cloud`](tacmesh_source::Observation::Cloud).
+//!   [`Observation::Cloud`](tacmesh_source::Observation::Cloud); an organised PCD (one with
+//!   `HEIGHT` > 1) plays organised, with its [`CloudGrid`](tacmesh_source::CloudGrid) and its
+//!   non-finite points in place, so that the daemon segments it as it does a depth image.
 //! - [`decode`]: the pure depth image decoders ([`read_depth_image`] and one per format).
 //! - [`list_depth_images`], [`read_association_file`], [`read_pose_file`]: which files play,
 //!   with which timestamps and poses.
@@ -41,7 +43,14 @@
 //! [`SourceError::Malformed`](tacmesh_source::SourceError::Malformed) and the next call goes on
 //! with the next frame; the end of a non-looping sequence is
 //! [`SourceError::EndOfStream`](tacmesh_source::SourceError::EndOfStream).
+//!
+//! A looping sequence keeps the frames it has decoded in memory, up to
+//! [`DEFAULT_LOOP_CACHE_BYTES`] (64 MiB; `loop_cache_bytes` in [`ImageSequenceConfig`] and
+//! [`CloudSequenceConfig`]), so that later passes copy them instead of decoding their files
+//! again; frames past the budget are decoded on every pass. A frame that cannot be read is
+//! never kept, and is reported on every pass.
 
+mod cache;
 mod clouds;
 pub mod decode;
 mod images;
@@ -49,6 +58,7 @@ mod listing;
 mod pacing;
 mod spec;
 
+pub use cache::DEFAULT_LOOP_CACHE_BYTES;
 pub use clouds::{CloudSequence, CloudSequenceConfig};
 pub use decode::{read_depth_image, DecodeError, DepthImage, Z16Layout};
 pub use images::{ImageSequence, ImageSequenceConfig};

@@ -11,6 +11,7 @@ use glam::Affine3A;
 use serde::Deserialize;
 use tacmesh_source::{DepthSource, Intrinsics, Observation, SourceError};
 
+use crate::cache::DEFAULT_LOOP_CACHE_BYTES;
 use crate::clouds::{CloudSequence, CloudSequenceConfig};
 use crate::decode::{extension, is_depth_image_path, read_depth_image, Z16Layout};
 use crate::images::{ImageSequence, ImageSequenceConfig};
@@ -345,6 +346,7 @@ impl ReplaySpec {
                     world_from_sensor,
                     poses,
                     z16_layout,
+                    loop_cache_bytes: DEFAULT_LOOP_CACHE_BYTES,
                 };
                 Ok(ReplaySource::Images(ImageSequence::new(
                     name, files, config,
@@ -376,6 +378,7 @@ impl ReplaySpec {
                     pacing,
                     looping: self.looping,
                     world_from_sensor,
+                    loop_cache_bytes: DEFAULT_LOOP_CACHE_BYTES,
                 };
                 Ok(ReplaySource::Clouds(CloudSequence::new(
                     name, files, config,

@@ -410,6 +410,39 @@ fn too_few_poses_is_refused() {
 // ---------------------------------------------------------------------------------------------
 // Cloud sequences
 
+/// The grabber's organised PCD replays as the organised cloud its TIFF deprojects to: the same
+/// point at every pixel, and no point (non-finite) at the same pixels.
+#[test]
+fn organised_pcd_replays_as_its_depth_image_deprojected_pixel_for_pixel() {
+    let mut source = CloudSequence::new(
+        "kinect",
+        vec![data(KINECT_PCD)],
+        CloudSequenceConfig::default(),
+    )
+    .expect("sequence");
+    let Observation::Cloud { cloud, grid, .. } = source.next_observation().expect("cloud") else {
+        panic!("a cloud sequence yields clouds");
+    };
+    let grid = grid.expect("a 640x480 PCD is organised");
+    assert_eq!((grid.width, grid.height), (640, 480));
+    let image = read_depth_image(&data(KINECT_TIFF), None).expect("TIFF");
+    let frame = DepthFrame {
+        intrinsics: kinect_intrinsics(),
+        depth_m: image.depth.iter().map(|&d| f32::from(d) * 0.001).collect(),
+        world_from_sensor: Affine3A::IDENTITY,
+        capture_time: Duration::ZERO,
+    };
+    let pixels = frame.deproject_organised(10.0).points_in_world;
+    assert_eq!(cloud.len(), pixels.len());
+    for (i, (p, q)) in cloud.points.iter().zip(&pixels).enumerate() {
+        assert_eq!(p.is_finite(), q.is_finite(), "pixel {i}: {p} vs {q}");
+        assert!(
+            !p.is_finite() || p.distance(*q) < 1e-6,
+            "pixel {i}: {p} vs {q}"
+        );
+    }
+}
+
 #[test]
 fn cloud_sequence_plays_clouds_with_the_configured_pose_at_a_fixed_rate() {
     let pose = Affine3A::from_translation(Vec3::new(0.0, 0.0, 1.0));
@@ -417,6 +450,7 @@ fn cloud_sequence_plays_clouds_with_the_configured_pose_at_a_fixed_rate() {
         pacing: Pacing::Fixed { fps: 20.0 },
         looping: true,
         world_from_sensor: pose,
+        ..CloudSequenceConfig::default()
     };
     let mut source = CloudSequence::new(
         "milk",
@@ -432,10 +466,12 @@ fn cloud_sequence_plays_clouds_with_the_configured_pose_at_a_fixed_rate() {
         match source.next_observation().expect("cloud") {
             Observation::Cloud {
                 cloud,
+                grid,
                 world_from_sensor,
                 capture_time,
             } => {
                 assert_eq!(cloud.len(), expected);
+                assert_eq!(grid, None, "neither file is organised");
                 assert_eq!(world_from_sensor, pose);
                 times.push(capture_time);
             }

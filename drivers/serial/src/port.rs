@@ -193,6 +193,7 @@ fn observation(
     tracing::trace!(device, points = cloud.len(), skipped, "revolution decoded");
     Observation::Cloud {
         cloud,
+        grid: None,
         world_from_sensor,
         capture_time,
     }

@@ -1,8 +1,11 @@
 use glam::Vec3;
 
+use crate::FrameError;
+
 /// An unorganised set of 3-D points in metres, optionally with unit normals.
 ///
-/// `normals`, when present, has exactly one entry per point.
+/// `normals`, when present, has exactly one entry per point. A cloud that came from a
+/// camera's pixel grid says so beside it, with a [`CloudGrid`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PointCloud {
     pub points: Vec<Vec3>,
@@ -53,6 +56,41 @@ impl PointCloud {
     }
 }
 
+/// The pixel grid of an organised cloud (an organised PCD, a depth camera's cloud): point
+/// `v * width + u` is pixel `(u, v)`, row-major, and a pixel without a reading holds a
+/// non-finite point, so that every point stays at its pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CloudGrid {
+    pub width: u32,
+    pub height: u32,
+}
+
+impl CloudGrid {
+    /// How many points a cloud on this grid has: `width * height`.
+    pub fn points(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// Whether `cloud` lies on this grid: exactly one point per pixel (and a normal per point
+    /// when it has normals).
+    pub fn check(&self, cloud: &PointCloud) -> Result<(), FrameError> {
+        let fits = cloud.len() == self.points()
+            && cloud
+                .normals
+                .as_ref()
+                .is_none_or(|n| n.len() == cloud.len());
+        if fits {
+            Ok(())
+        } else {
+            Err(FrameError::OffGrid {
+                width: self.width,
+                height: self.height,
+                points: cloud.len(),
+            })
+        }
+    }
+}
+
 /// Axis-aligned bounds `(min, max)` of a point set, or `None` when it is empty.
 pub(crate) fn bounds_of(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
     let first = *points.first()?;
@@ -76,6 +114,25 @@ mod tests {
         assert_eq!(cloud.retain_finite(), 1);
         assert_eq!(cloud.points, vec![Vec3::ZERO, Vec3::ONE]);
         assert_eq!(cloud.normals, Some(vec![Vec3::X, Vec3::Z]));
+    }
+
+    #[test]
+    fn grid_check_wants_one_point_per_pixel() {
+        let grid = CloudGrid {
+            width: 2,
+            height: 2,
+        };
+        let on_grid = PointCloud::new(vec![Vec3::ZERO, Vec3::NAN, Vec3::NAN, Vec3::ONE]);
+        assert_eq!(grid.check(&on_grid), Ok(()));
+        let short = PointCloud::new(vec![Vec3::ZERO; 3]);
+        assert_eq!(
+            grid.check(&short),
+            Err(FrameError::OffGrid {
+                width: 2,
+                height: 2,
+                points: 3
+            })
+        );
     }
 
     #[test]

@@ -45,8 +45,8 @@ pub struct DepthFrame {
     pub capture_time: Duration,
 }
 
-/// Why a depth frame cannot be used. A source that sends one sends a malformed frame; the
-/// daemon counts it and skips it.
+/// Why a depth frame (or an organised cloud) cannot be used. A source that sends one sends a
+/// malformed frame; the daemon counts it and skips it.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FrameError {
     #[error("{width}×{height} intrinsics but {values} depth values: the driver's buffer does not match its resolution")]
@@ -54,6 +54,12 @@ pub enum FrameError {
         width: u32,
         height: u32,
         values: usize,
+    },
+    #[error("an organised cloud of {width}×{height} pixels with {points} points: the driver's cloud does not match its grid")]
+    OffGrid {
+        width: u32,
+        height: u32,
+        points: usize,
     },
     #[error("unusable intrinsics {intrinsics:?}: the size must be non-zero, the focal lengths finite and non-zero and the principal point finite (is the calibration corrupt?)")]
     BadIntrinsics { intrinsics: Intrinsics },

@@ -3,7 +3,8 @@
 //! Entry points:
 //! - [`DepthSource`]: a backend that yields timestamped [`Observation`]s.
 //! - [`DepthFrame`] with its [`Intrinsics`]: one organised depth image from a camera.
-//! - [`PointCloud`]: points (and optional normals) in metres, in one named frame.
+//! - [`PointCloud`]: points (and optional normals) in metres, in one named frame; with a
+//!   [`CloudGrid`] when it is organised.
 //! - [`TriMesh`]: an indexed triangle mesh in metres.
 //! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read.
 //!
@@ -17,7 +18,7 @@ mod mesh;
 mod source;
 
 pub use clock::monotonic_now;
-pub use cloud::PointCloud;
+pub use cloud::{CloudGrid, PointCloud};
 pub use frame::{Deprojection, DepthFrame, FrameError, Intrinsics};
 pub use mesh::TriMesh;
 pub use source::{DepthSource, Observation, SourceError};

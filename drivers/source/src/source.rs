@@ -2,7 +2,7 @@ use std::time::Duration;
 
 use glam::Affine3A;
 
-use crate::{DepthFrame, PointCloud};
+use crate::{CloudGrid, DepthFrame, PointCloud};
 
 /// What a source yields: an organised depth image or an already-deprojected cloud
 /// (range scanners, recorded clouds).
@@ -11,6 +11,11 @@ pub enum Observation {
     Depth(DepthFrame),
     Cloud {
         cloud: PointCloud,
+        /// `Some` when the cloud is organised (a recorded organised PCD): one point per pixel
+        /// of the grid, non-finite where there was no reading ([`CloudGrid::check`] tells
+        /// whether it fits). `None`: a plain set of points (a range scanner's revolution, a
+        /// PLY or XYZ file).
+        grid: Option<CloudGrid>,
         world_from_sensor: Affine3A,
         capture_time: Duration,
     },

@@ -104,3 +104,42 @@ fn every_format_keeps_and_counts_non_finite_points_in_file_order() {
         assert_eq!(file.non_finite, 2, "{file_name}");
     }
 }
+
+/// An organised PCD (3×2 pixels) with a pixel that has no reading.
+fn organised_pcd(middle: &str) -> Vec<u8> {
+    let header = "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 3\nHEIGHT 2\n\
+                  POINTS 6\nDATA ascii\n";
+    format!("{header}0 0 1\n1 0 1\n2 0 1\n0 1 1\n{middle}\n2 1 1\n").into_bytes()
+}
+
+#[test]
+fn an_organised_pcd_keeps_its_grid_while_its_points_stay_in_place() {
+    let grid = Some(tacmesh_source::CloudGrid {
+        width: 3,
+        height: 2,
+    });
+    let (_dir, path) = scratch_file("organised.pcd", &organised_pcd("nan nan nan"));
+    let kept = read_cloud_file(&path, NonFinite::Keep).expect("organised PCD");
+    assert_eq!(kept.grid, grid);
+    assert!(kept.cloud.points[4].is_nan());
+    assert_eq!(kept.cloud.points[5], Vec3::new(2.0, 1.0, 1.0));
+    // Dropping the missing pixel takes the cloud off its grid.
+    let dropped = read_cloud_file(&path, NonFinite::Drop).expect("organised PCD");
+    assert_eq!((dropped.cloud.len(), dropped.grid), (5, None));
+    // With nothing to drop, the grid holds either way.
+    let (_dir, full) = scratch_file("full.pcd", &organised_pcd("1 1 1"));
+    assert_eq!(
+        read_cloud_file(&full, NonFinite::Drop).expect("full").grid,
+        grid
+    );
+}
+
+#[test]
+fn unorganised_files_have_no_grid() {
+    for (file_name, bytes) in every_format() {
+        let (_dir, path) = scratch_file(file_name, &bytes);
+        let file = read_cloud_file(&path, NonFinite::Keep)
+            .unwrap_or_else(|err| panic!("{file_name}: {err}"));
+        assert_eq!(file.grid, None, "{file_name}");
+    }
+}

@@ -74,6 +74,7 @@ fn camsense_observation_carries_cloud_pose_and_time() {
         cloud,
         world_from_sensor,
         capture_time,
+        ..
     } = source.next_observation().expect("an observation")
     else {
         panic!("a range scanner yields clouds");
@@ -188,6 +189,7 @@ fn rplidar_emulated_room_through_the_pty() {
             cloud,
             world_from_sensor,
             capture_time,
+            ..
         } = source.next_observation().expect("a revolution")
         else {
             panic!("a range scanner yields clouds");
