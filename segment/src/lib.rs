@@ -10,7 +10,8 @@
 //!   [`StageTimes`].
 //! - [`segment_cloud`]: [`segment`] for a [`PointCloud`].
 //! - [`segment_organised`]: an organised cloud (a depth image) segmented on every 2nd or
-//!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path.
+//!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path
+//!   ([`segment_organised_timed`] with the stage times).
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
 //!   --objects`'.
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
@@ -52,7 +53,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tacmesh_source::PointCloud;
 
-pub use organised::{segment_organised, OrganisedSegmentation};
+pub use organised::{segment_organised, segment_organised_timed, OrganisedSegmentation};
 pub use planes::SupportPlane;
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
@@ -273,12 +274,21 @@ pub struct StageTimes {
     pub clusters: Duration,
     /// Clusters split at their concave creases (zero if off).
     pub convexity: Duration,
+    /// Picking the strided pixels of an organised cloud and labelling every pixel from its
+    /// strided neighbour ([`segment_organised_timed`]; zero otherwise).
+    pub organised: Duration,
 }
 
 impl StageTimes {
     /// The sum of the stages.
     pub fn total(&self) -> Duration {
-        self.planes + self.classify + self.voxels + self.creases + self.clusters + self.convexity
+        self.planes
+            + self.classify
+            + self.voxels
+            + self.creases
+            + self.clusters
+            + self.convexity
+            + self.organised
     }
 }
 

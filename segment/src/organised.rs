@@ -7,11 +7,14 @@
 //! labelled mOSD scans 0.89 against 0.93 at full resolution, `tests/real_data.rs`), and the
 //! full-resolution object points go on to tracking and fusion.
 //!
-//! Entry point: [`segment_organised`].
+//! Entry points: [`segment_organised`], and [`segment_organised_timed`], which also returns
+//! the stage times.
+
+use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
+use crate::{segment_timed, SegmentConfig, Segmentation, StageTimes, SupportPlane};
 
 /// A full-resolution point joins the object of its strided neighbour only within this
 /// distance, in metres, so pixels across a depth edge do not.
@@ -31,12 +34,13 @@ pub struct OrganisedSegmentation {
 /// Segments every `stride`-th pixel (in each direction) of the organised cloud `points`
 /// (`width × height`, row-major) with `config`, whose cluster sizes count full-resolution
 /// points (they are divided by `stride²` for the strided cloud), starting from the plane
-/// `hints` as [`segment_with_hints`] does. Then each remaining point joins the object of its
-/// strided neighbour (the top-left pixel of its `stride × stride` block) when the two are
-/// within `LABEL_SPREAD_M` and the point is on no support or background plane.
+/// `hints` as [`segment_with_hints`](crate::segment_with_hints) does. Then each remaining
+/// point joins the object of its strided neighbour (the top-left pixel of its `stride ×
+/// stride` block) when the two are within `LABEL_SPREAD_M` and the point is on no support or
+/// background plane.
 ///
-/// Stride 1 is [`segment_with_hints`] itself. Never panics: a cloud shorter than
-/// `width × height` is segmented on the pixels it has.
+/// Stride 1 is [`segment_with_hints`](crate::segment_with_hints) itself. Never panics: a
+/// cloud shorter than `width × height` is segmented on the pixels it has.
 pub fn segment_organised(
     points: &[Vec3],
     width: u32,
@@ -45,6 +49,20 @@ pub fn segment_organised(
     config: &SegmentConfig,
     hints: &[SupportPlane],
 ) -> OrganisedSegmentation {
+    segment_organised_timed(points, width, height, stride, config, hints).0
+}
+
+/// [`segment_organised`], also returning how long each stage took; picking the strided pixels
+/// and labelling every pixel from its strided neighbour is [`StageTimes::organised`].
+pub fn segment_organised_timed(
+    points: &[Vec3],
+    width: u32,
+    height: u32,
+    stride: u32,
+    config: &SegmentConfig,
+    hints: &[SupportPlane],
+) -> (OrganisedSegmentation, StageTimes) {
+    let clock = Instant::now();
     let stride = stride.max(1) as usize;
     let width = width as usize;
     let height = (height as usize).min(points.len() / width.max(1));
@@ -70,12 +88,15 @@ pub fn segment_organised(
                 .map(move |u| points[v * width + u])
         })
         .collect();
-    let strided = segment_with_hints(&sub, &config, hints);
+    let gathered = clock.elapsed();
+    let (strided, mut times) = segment_timed(&sub, &config, hints);
+    times.organised = gathered;
     if stride == 1 {
         let objects = strided.objects.clone();
-        return OrganisedSegmentation { strided, objects };
+        return (OrganisedSegmentation { strided, objects }, times);
     }
 
+    let clock = Instant::now();
     let mut objects = vec![Vec::new(); strided.objects.len()];
     for v in 0..height {
         for u in 0..width {
@@ -103,7 +124,8 @@ pub fn segment_organised(
             }
         }
     }
-    OrganisedSegmentation { strided, objects }
+    times.organised += clock.elapsed();
+    (OrganisedSegmentation { strided, objects }, times)
 }
 
 #[cfg(test)]
