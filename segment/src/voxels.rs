@@ -10,6 +10,7 @@
 use glam::{DVec3, Vec3};
 use rustc_hash::FxHashMap;
 
+use crate::grid::floor_i32;
 use crate::range::RangeDistance;
 
 /// The occupied cells of a set of points.
@@ -43,9 +44,9 @@ pub(crate) fn voxel_cells(
         let p = points[i as usize];
         let band = coarsen.band(p);
         let side_m = cell_m * (1u32 << band) as f32;
-        let q = (p / side_m).floor();
+        let q = p / side_m;
         // Saturating casts: absurdly distant points only share cells.
-        let key = [q.x as i32, q.y as i32, q.z as i32, band as i32];
+        let key = [floor_i32(q.x), floor_i32(q.y), floor_i32(q.z), band as i32];
         let id = match last {
             Some((last_key, id)) if last_key == key => id,
             _ => {
@@ -54,7 +55,7 @@ pub(crate) fn voxel_cells(
                 if id == next {
                     sums.push(DVec3::ZERO);
                     counts.push(0);
-                    corners.push(q * side_m);
+                    corners.push(q.floor() * side_m);
                 }
                 last = Some((key, id));
                 id
