@@ -35,7 +35,7 @@ use std::collections::BinaryHeap;
 use glam::{DMat4, DVec4, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::grid::VoxelGrid;
+use crate::links::Links as CellLinks;
 use crate::planes::fit_plane;
 
 /// The settings of [`split_at_concave_creases`].
@@ -83,30 +83,20 @@ impl Links {
     }
 }
 
-/// Stage 1: the pairs of `cluster`'s cells within `link_m(p, q)` of each other (searched on a
-/// grid of `max_link_m`).
-fn link_cells(
-    centroids: &[Vec3],
-    cluster: &[u32],
-    max_link_m: f32,
-    link_m: impl Fn(Vec3, Vec3) -> f32,
-) -> Links {
-    let grid = VoxelGrid::new(centroids, cluster, max_link_m);
-    let mut position = FxHashMap::default();
-    for (k, &c) in cluster.iter().enumerate() {
-        position.insert(c, k as u32);
-    }
+/// Stage 1: the links of `cluster`'s cells among themselves, from the links of all cells
+/// (`cell_links.of(c)`, the cells linked to cell `c`), with `position[c]` the position of
+/// cell `c` in its cluster: a linked cell is in this cluster if this cluster has it there.
+fn link_cells(cluster: &[u32], (cell_links, position): (&CellLinks, &[u32])) -> Links {
     let mut start = Vec::with_capacity(cluster.len() + 1);
     let mut neighbours = Vec::new();
     start.push(0);
     for &c in cluster {
-        let p = centroids[c as usize];
-        grid.for_each_near(p, |j| {
-            let q = centroids[j as usize];
-            if j != c && p.distance_squared(q) <= link_m(p, q).powi(2) {
-                neighbours.push(position[&j]);
+        for &j in cell_links.of(c as usize) {
+            let k = position[j as usize];
+            if cluster.get(k as usize) == Some(&j) {
+                neighbours.push(k);
             }
-        });
+        }
         start.push(neighbours.len() as u32);
     }
     Links { start, neighbours }
@@ -463,16 +453,17 @@ fn join_dished(
 /// Splits one cluster (indices into `centroids`, each cell standing for `weights[c]` points
 /// and with the unit normal `cell_normals[c]` towards the sensor, zero if undetermined) at
 /// its concave creases; returns the pieces, each ascending, heaviest first. A cluster with
-/// no concave crease comes back whole. `cell_m(p)` is the side of the cell at `p`, and
-/// `link_m(p, q)` the linking distance of the clustering.
+/// no concave crease comes back whole. `links` are the clustering's links of every cell
+/// (`links.rs`) and each cell's position in its cluster (see `link_cells`); `cell_m(p)` is
+/// the side of the cell at `p`.
 pub(crate) fn split_at_concave_creases(
     centroids: &[Vec3],
     weights: &[u32],
     cell_normals: &[Vec3],
     cluster: &[u32],
+    links: (&CellLinks, &[u32]),
     params: &ConvexityParams,
     cell_m: impl Fn(Vec3) -> f32,
-    link_m: impl Fn(Vec3, Vec3) -> f32,
 ) -> Vec<Vec<u32>> {
     if cluster.len() < 4 || !params.enabled() {
         return vec![cluster.to_vec()];
@@ -484,11 +475,7 @@ pub(crate) fn split_at_concave_creases(
             PATCH_DEPTH_STEPS * params.range_step_per_m2 * p.distance_squared(params.viewpoint);
         params.patch_m.max(3.0 * cell_m(p)).max(steps_m)
     };
-    let max_link = cluster.iter().fold(0.0f32, |m, &c| {
-        let p = centroids[c as usize];
-        m.max(link_m(p, p))
-    });
-    let links = link_cells(centroids, cluster, max_link, &link_m);
+    let links = link_cells(cluster, links);
     let normals: Vec<Vec3> = cluster
         .iter()
         .map(|&c| cell_normals.get(c as usize).copied().unwrap_or(Vec3::ZERO))
@@ -618,14 +605,16 @@ mod tests {
                 .iter()
                 .map(|plane| plane.normal)
                 .collect();
+        let reach = crate::range::RangeDistance::new(0.012, 0.0, 1.0, params().viewpoint);
+        let links = CellLinks::new(points, &all, &reach);
         split_at_concave_creases(
             points,
             &[],
             &normals,
             &all,
+            (&links, &all),
             &params(),
             |_| 0.008,
-            |_, _| 0.012,
         )
     }
 

@@ -103,10 +103,16 @@ impl VoxelGrid {
     /// (`c < cell_count()`), in the order [`VoxelGrid::for_each_near`] visits them for a point
     /// of cell `c`.
     pub(crate) fn around_cell(&self, c: usize, visit: impl FnMut(&[u32])) {
-        self.around(self.keys[c], visit);
+        self.around_key(self.keys[c], visit);
     }
 
-    fn around(&self, c: Cell, mut visit: impl FnMut(&[u32])) {
+    /// The key of the cell `p` falls in, occupied or not.
+    pub(crate) fn key_of(&self, p: Vec3) -> [i32; 3] {
+        cell_of(p, self.inv_cell_m)
+    }
+
+    /// [`VoxelGrid::around_cell`] for the cell of key `c` (see [`VoxelGrid::key_of`]).
+    pub(crate) fn around_key(&self, c: Cell, mut visit: impl FnMut(&[u32])) {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
@@ -126,7 +132,7 @@ impl VoxelGrid {
     /// Calls `visit` with every binned point in the 27 cells around `p`'s cell (a superset of
     /// the binned points within one cell side of `p`).
     pub fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(u32)) {
-        self.around(cell_of(p, self.inv_cell_m), |members| {
+        self.around_key(cell_of(p, self.inv_cell_m), |members| {
             for &j in members {
                 visit(j);
             }
