@@ -83,6 +83,41 @@ impl Links {
     }
 }
 
+/// Values grouped by a key below a bound, each group in the order the values came: `of(k)`.
+struct Grouped {
+    start: Vec<u32>,
+    values: Vec<u32>,
+}
+
+impl Grouped {
+    /// Groups the values of `(key, value)` pairs by key (`key < keys`; pairs keyed `u32::MAX`
+    /// are left out), by counting sort.
+    fn new(keys: usize, pairs: impl Iterator<Item = (u32, u32)> + Clone) -> Self {
+        let mut start = vec![0u32; keys + 1];
+        for (key, _) in pairs.clone() {
+            if key != u32::MAX {
+                start[key as usize + 1] += 1;
+            }
+        }
+        for k in 0..keys {
+            start[k + 1] += start[k];
+        }
+        let mut fill = start.clone();
+        let mut values = vec![0u32; start[keys] as usize];
+        for (key, value) in pairs {
+            if key != u32::MAX {
+                values[fill[key as usize] as usize] = value;
+                fill[key as usize] += 1;
+            }
+        }
+        Self { start, values }
+    }
+
+    fn of(&self, key: usize) -> &[u32] {
+        &self.values[self.start[key] as usize..self.start[key + 1] as usize]
+    }
+}
+
 /// Stage 1: the links of `cluster`'s cells among themselves, from the links of all cells
 /// (`cell_links.of(c)`, the cells linked to cell `c`), with `position[c]` the position of
 /// cell `c` in its cluster: a linked cell is in this cluster if this cluster has it there.
@@ -285,30 +320,34 @@ fn join_patches(
 ) -> Vec<u32> {
     let patches = patch_weights.len();
     let mut sets = Sets::new(patch_weights);
+    // (links through joined connections, all links) between each pair of pieces.
+    let mut between: Vec<PiecesLinked> = connections
+        .iter()
+        .map(|&(pair, links, joined)| (pair, (if joined { links } else { 0 }, links)))
+        .collect();
     loop {
-        // (links through joined connections, all links) between each pair of pieces.
-        let mut between: FxHashMap<(u32, u32), (u32, u32)> = FxHashMap::default();
-        for &((a, b), links, joined) in connections {
-            let (ra, rb) = (sets.find(a), sets.find(b));
-            if ra != rb {
-                let entry = between.entry((ra.min(rb), ra.max(rb))).or_default();
-                entry.1 += links;
-                if joined {
-                    entry.0 += links;
-                }
-            }
-        }
-        let mut agreeing: Vec<(f32, u32, (u32, u32))> = between
-            .into_iter()
+        contract(&mut between, &mut sets);
+        // The best-agreeing pairs first (the larger share of joined links, then more links,
+        // then the lower pair), as one integer to sort by: a share above one half is a
+        // positive float, whose bits order as it does.
+        let mut agreeing: Vec<u128> = between
+            .iter()
             .filter(|(_, (joined, all))| 2 * joined > *all)
-            .map(|(pair, (joined, all))| (joined as f32 / all as f32, all, pair))
+            .map(|&((a, b), (joined, all))| {
+                let share = joined as f32 / all as f32;
+                (u128::from(!share.to_bits()) << 96)
+                    | (u128::from(!all) << 64)
+                    | (u128::from(a) << 32)
+                    | u128::from(b)
+            })
             .collect();
         if agreeing.is_empty() {
             break;
         }
-        agreeing.sort_by(|x, y| y.0.total_cmp(&x.0).then(y.1.cmp(&x.1)).then(x.2.cmp(&y.2)));
+        agreeing.sort_unstable();
         let mut merged = vec![false; patches];
-        for (_, _, (a, b)) in agreeing {
+        for key in agreeing {
+            let (a, b) = ((key >> 32) as u32, key as u32);
             if !merged[a as usize] && !merged[b as usize] {
                 merged[a as usize] = true;
                 merged[b as usize] = true;
@@ -317,37 +356,59 @@ fn join_patches(
         }
     }
     loop {
-        let mut shared: FxHashMap<(u32, u32), u32> = FxHashMap::default();
-        for &((a, b), links, _) in connections {
-            let (ra, rb) = (sets.find(a), sets.find(b));
-            if ra != rb {
-                *shared.entry((ra, rb)).or_default() += links;
-                *shared.entry((rb, ra)).or_default() += links;
-            }
-        }
+        contract(&mut between, &mut sets);
         let mut patches_in = vec![0usize; patches];
         for p in 0..patches as u32 {
             patches_in[sets.find(p) as usize] += 1;
         }
-        let lightest = shared
-            .keys()
-            .map(|&(piece, _)| piece)
-            .filter(|&r| {
-                sets.weight[r as usize] < min_weight || patches_in[r as usize] < MIN_PIECE_PATCHES
-            })
+        let small = |r: u32| {
+            sets.weight[r as usize] < min_weight || patches_in[r as usize] < MIN_PIECE_PATCHES
+        };
+        let lightest = between
+            .iter()
+            .flat_map(|&((a, b), _)| [a, b])
+            .filter(|&r| small(r))
             .min_by_key(|&r| (sets.weight[r as usize], r));
         let Some(small) = lightest else { break };
-        let into = shared
+        let into = between
             .iter()
-            .filter(|(&(piece, _), _)| piece == small)
-            .max_by_key(|(&(_, other), &links)| (links, Reverse(other)))
-            .map(|(&(_, other), _)| other);
+            .filter_map(|&((a, b), (_, links))| match small {
+                _ if small == a => Some((b, links)),
+                _ if small == b => Some((a, links)),
+                _ => None,
+            })
+            .max_by_key(|&(other, links)| (links, Reverse(other)))
+            .map(|(other, _)| other);
         match into {
             Some(other) => sets.union(small, other),
             None => break,
         }
     }
     (0..patches as u32).map(|p| sets.find(p)).collect()
+}
+
+/// Two pieces (the lower first) and the links between them: (through connections judged
+/// joined, all).
+type PiecesLinked = ((u32, u32), (u32, u32));
+
+/// Keys `between` by the pieces' current roots, drops the links inside a piece and sums those
+/// between the same two pieces: the list shrinks as pieces merge, where recounting every
+/// connection each round cost the split most of its time.
+fn contract(between: &mut Vec<PiecesLinked>, sets: &mut Sets) {
+    for ((a, b), _) in between.iter_mut() {
+        let (ra, rb) = (sets.find(*a), sets.find(*b));
+        (*a, *b) = (ra.min(rb), ra.max(rb));
+    }
+    between.retain(|((a, b), _)| a != b);
+    between.sort_unstable_by_key(|&(pair, _)| pair);
+    between.dedup_by(|later, kept| {
+        let same = later.0 == kept.0;
+        if same {
+            kept.1 .0 += later.1 .0;
+            kept.1 .1 += later.1 .1;
+        }
+        same
+    });
 }
 
 /// The mean curvature, in 1/m, of the quadric `h = a x² + b xy + c y² + d` fitted by least
@@ -482,22 +543,20 @@ pub(crate) fn split_at_concave_creases(
         .collect();
     let (patch_of, patch_count) = grow_patches(centroids, cluster, &links, &normals, seed_m);
 
-    // Each patch's weight, centroid and normal (the plane through its cells).
+    // Each patch's cells (in cluster order), weight, centroid and normal (the plane through
+    // its cells).
     let weight_of = |c: u32| weights.get(c as usize).map_or(1, |&w| w as usize);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); patch_count];
-    for (k, &p) in patch_of.iter().enumerate() {
-        if p != u32::MAX {
-            members[p as usize].push(cluster[k]);
-        }
-    }
-    let patch_weights: Vec<usize> = members
-        .iter()
-        .map(|m| m.iter().map(|&c| weight_of(c)).sum())
+    let members = Grouped::new(
+        patch_count,
+        patch_of.iter().zip(cluster).map(|(&p, &c)| (p, c)),
+    );
+    let patch_weights: Vec<usize> = (0..patch_count)
+        .map(|p| members.of(p).iter().map(|&c| weight_of(c)).sum())
         .collect();
-    let patches: Vec<Patch> = members
-        .iter()
+    let patches: Vec<Patch> = (0..patch_count)
         .zip(&patch_weights)
-        .map(|(m, &w)| {
+        .map(|(p, &w)| {
+            let m = members.of(p);
             let centroid = m.iter().fold(Vec3::ZERO, |s, &c| {
                 s + centroids[c as usize] * weight_of(c) as f32
             }) / w.max(1) as f32;
@@ -510,28 +569,30 @@ pub(crate) fn split_at_concave_creases(
         })
         .collect();
 
-    // Adjacent patches, how many cell links join them, and the judgement of each connection.
-    let mut links_between: FxHashMap<(u32, u32), u32> = FxHashMap::default();
+    // Adjacent patches, how many cell links join them, and the judgement of each connection,
+    // in the order of the patches.
+    let mut adjacent: Vec<(u32, u32)> = Vec::new();
     for (k, &a) in patch_of.iter().enumerate() {
         for &j in links.of(k) {
             let b = patch_of[j as usize];
             if a < b && b != u32::MAX {
-                *links_between.entry((a, b)).or_default() += 1;
+                adjacent.push((a, b));
             }
         }
     }
-    let mut connections: Vec<((u32, u32), u32, bool)> = links_between
-        .into_iter()
-        .map(|((a, b), n)| {
+    adjacent.sort_unstable();
+    let connections: Vec<((u32, u32), u32, bool)> = adjacent
+        .chunk_by(|x, y| x == y)
+        .map(|run| {
+            let (a, b) = run[0];
             let joined = judge_connection(
                 &patches[a as usize],
                 &patches[b as usize],
                 params.concave_tolerance_deg,
             );
-            ((a, b), n, joined)
+            ((a, b), run.len() as u32, joined)
         })
         .collect();
-    connections.sort_unstable();
     let mut piece_of = join_patches(patch_weights, &connections, params.min_piece_weight);
     join_dished(
         centroids,
