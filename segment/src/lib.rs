@@ -398,20 +398,12 @@ pub fn segment_timed(
             &mut times,
         );
         let clock = Instant::now();
-        let points_of_cell = voxels::points_of_cells(&cells, &candidates);
-        let to_points = |cell_list: &[u32]| -> Vec<u32> {
-            let mut object: Vec<u32> = cell_list
-                .iter()
-                .flat_map(|&c| points_of_cell.of(c))
-                .copied()
-                .collect();
-            object.sort_unstable();
-            object
-        };
+        let to_points =
+            |cell_lists: &[Vec<u32>]| voxels::points_of_cell_lists(&cells, &candidates, cell_lists);
         let mut objects = Vec::with_capacity(cell_objects.len());
         let mut dropped = 0;
-        for cell_list in &cell_objects {
-            if background_of(&to_points(cell_list)).is_some() {
+        for (cell_list, object) in cell_objects.iter().zip(to_points(&cell_objects)) {
+            if background_of(&object).is_some() {
                 dropped += 1;
                 continue;
             }
@@ -448,8 +440,8 @@ pub fn segment_timed(
                     .sum::<usize>()
                     >= config.min_cluster_points.max(1)
             })
-            .map(|piece| to_points(&piece))
             .collect();
+        let pieces = to_points(&pieces);
         times.convexity = clock.elapsed();
         (pieces, dropped)
     } else {

@@ -99,28 +99,35 @@ pub fn segment_organised_timed(
     let clock = Instant::now();
     let mut objects = vec![Vec::new(); strided.objects.len()];
     for v in 0..height {
-        for u in 0..width {
-            let i = v * width + u;
-            let p = points[i];
-            if !p.is_finite() {
+        // The strided pixels of this row's blocks; the pixels of an unlabelled block are not
+        // looked at.
+        let blocks = (v / stride) * sub_width..(v / stride + 1) * sub_width;
+        for (block, (&label, &anchor)) in strided.labels[blocks.clone()]
+            .iter()
+            .zip(&sub[blocks])
+            .enumerate()
+        {
+            if label == 0 {
                 continue;
             }
-            let j = (v / stride) * sub_width + u / stride;
-            let label = strided.labels[j] as usize;
-            if label == 0 || p.distance(sub[j]) > LABEL_SPREAD_M {
-                continue;
-            }
-            let band_m = config.plane_distance_at(p);
-            let on_plane = strided
-                .planes
-                .iter()
-                .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
-                || strided
-                    .background
+            for u in block * stride..((block + 1) * stride).min(width) {
+                let i = v * width + u;
+                let p = points[i];
+                if !p.is_finite() || p.distance(anchor) > LABEL_SPREAD_M {
+                    continue;
+                }
+                let band_m = config.plane_distance_at(p);
+                let on_plane = strided
+                    .planes
                     .iter()
-                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
-            if !on_plane {
-                objects[label - 1].push(i as u32);
+                    .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
+                    || strided
+                        .background
+                        .iter()
+                        .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
+                if !on_plane {
+                    objects[label as usize - 1].push(i as u32);
+                }
             }
         }
     }

@@ -78,35 +78,34 @@ pub(crate) fn voxel_cells(
     }
 }
 
-/// The points of each cell: `of(c)` lists the input indices in cell `c`, ascending.
-pub(crate) struct PointsOfCells {
-    start: Vec<u32>,
-    members: Vec<u32>,
-}
-
-impl PointsOfCells {
-    pub(crate) fn of(&self, cell: u32) -> &[u32] {
-        &self.members[self.start[cell as usize] as usize..self.start[cell as usize + 1] as usize]
-    }
-}
-
-/// Groups `indices` (the input of [`voxel_cells`], ascending) by their cell.
-pub(crate) fn points_of_cells(cells: &Cells, indices: &[u32]) -> PointsOfCells {
-    // Counting sort by cell keeps each cell's points ascending.
-    let mut start = vec![0u32; cells.counts.len() + 1];
-    for &c in &cells.cell_of {
-        start[c as usize + 1] += 1;
-    }
-    for k in 0..cells.counts.len() {
-        start[k + 1] += start[k];
-    }
-    let mut fill = start.clone();
-    let mut members = vec![0u32; indices.len()];
+/// The points of each list of cells in `lists` (disjoint lists of cells of `cells`), from the
+/// input of [`voxel_cells`] (`indices`, ascending): one pass over the points, which keeps each
+/// list of points ascending without a sort.
+pub(crate) fn points_of_cell_lists(
+    cells: &Cells,
+    indices: &[u32],
+    lists: &[Vec<u32>],
+) -> Vec<Vec<u32>> {
+    let mut list_of = vec![u32::MAX; cells.counts.len()];
+    let mut points: Vec<Vec<u32>> = lists
+        .iter()
+        .enumerate()
+        .map(|(k, list)| {
+            let mut size = 0;
+            for &c in list {
+                list_of[c as usize] = k as u32;
+                size += cells.counts[c as usize] as usize;
+            }
+            Vec::with_capacity(size)
+        })
+        .collect();
     for (&i, &c) in indices.iter().zip(&cells.cell_of) {
-        members[fill[c as usize] as usize] = i;
-        fill[c as usize] += 1;
+        let k = list_of[c as usize];
+        if k != u32::MAX {
+            points[k as usize].push(i);
+        }
     }
-    PointsOfCells { start, members }
+    points
 }
 
 #[cfg(test)]
@@ -128,5 +127,9 @@ mod tests {
         assert_eq!(cells.cell_of, vec![0, 1, 0, 1]);
         assert!(cells.centroids[0].distance(Vec3::splat(0.002)) < 1e-6);
         assert!(cells.centroids[1].distance(Vec3::new(0.015, 0.001, 0.001)) < 1e-6);
+        assert_eq!(
+            points_of_cell_lists(&cells, &[0, 1, 2, 4], &[vec![1], vec![0]]),
+            vec![vec![1, 4], vec![0, 2]]
+        );
     }
 }
