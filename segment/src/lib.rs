@@ -567,17 +567,31 @@ fn classify(
         }
         candidates.push(i);
     }
-    for ((plane, mut inliers), fringe) in planes.iter_mut().zip(inliers).zip(fringes) {
-        if !fringe.is_empty() {
-            inliers.extend(fringe);
-            inliers.sort_unstable();
-        }
-        plane.inliers = inliers;
+    for ((plane, inliers), fringe) in planes.iter_mut().zip(inliers).zip(fringes) {
+        plane.inliers = merge_ascending(&inliers, &fringe);
     }
     for (plane, dropped) in background.iter_mut().zip(dropped) {
         plane.inliers = dropped;
     }
     candidates
+}
+
+/// The union of two disjoint ascending lists, ascending.
+fn merge_ascending(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        if a[i] < b[j] {
+            out.push(a[i]);
+            i += 1;
+        } else {
+            out.push(b[j]);
+            j += 1;
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+    out
 }
 
 /// Stages 4 and 5 on `indices` into `points` (each standing for `weights[i]` input points, or

@@ -218,17 +218,19 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
         sum += points[i as usize].as_dvec3() - origin;
     }
     let mean = sum / indices.len() as f64;
-    let mut c = [[0.0f64; 3]; 3];
+    // The six distinct entries of the symmetric covariance.
+    let (mut xx, mut xy, mut xz, mut yy, mut yz, mut zz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for &i in indices {
         let r = points[i as usize].as_dvec3() - origin - mean;
-        let r = r.to_array();
-        for (j, row) in c.iter_mut().enumerate() {
-            for (k, cell) in row.iter_mut().enumerate() {
-                *cell += r[j] * r[k];
-            }
-        }
+        xx += r.x * r.x;
+        xy += r.x * r.y;
+        xz += r.x * r.z;
+        yy += r.y * r.y;
+        yz += r.y * r.z;
+        zz += r.z * r.z;
     }
-    let n = smallest_eigenvector(DMat3::from_cols_array_2d(&c)).normalize_or_zero();
+    let c = DMat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz]);
+    let n = smallest_eigenvector(c).normalize_or_zero();
     if n == DVec3::ZERO {
         return None;
     }
