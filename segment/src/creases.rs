@@ -39,6 +39,7 @@ pub(crate) fn local_planes(
     viewpoint: Vec3,
 ) -> Vec<LocalPlane> {
     let grid = VoxelGrid::new(points, indices, radius_m);
+    let neighbourhoods = grid.neighbourhoods();
     let radius_sq = radius_m * radius_m;
     let per_cell: Vec<Vec<(u32, LocalPlane)>> = (0..grid.cell_count())
         .into_par_iter()
@@ -46,9 +47,10 @@ pub(crate) fn local_planes(
             || (Vec::new(), Vec::new()),
             |(around, near): &mut (Vec<Vec3>, Vec<u32>), c| {
                 around.clear();
-                grid.around_cell(c, |members| {
+                for &id in neighbourhoods.of(c) {
+                    let members = grid.cell(id as usize).0;
                     around.extend(members.iter().map(|&j| points[j as usize]));
-                });
+                }
                 let (members, slots) = grid.cell(c);
                 members
                     .iter()
@@ -57,10 +59,11 @@ pub(crate) fn local_planes(
                         let p = points[i as usize];
                         // `near` indexes `around`, in the order of a search around `p`.
                         near.clear();
-                        near.extend(
-                            (0..around.len() as u32)
-                                .filter(|&k| p.distance_squared(around[k as usize]) <= radius_sq),
-                        );
+                        for (k, &q) in around.iter().enumerate() {
+                            if p.distance_squared(q) <= radius_sq {
+                                near.push(k as u32);
+                            }
+                        }
                         (slot, local_plane(around, near, p, viewpoint))
                     })
                     .collect()

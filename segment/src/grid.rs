@@ -3,9 +3,9 @@
 //! their integer coordinates in a hash map, each holding a slice of point indices. A ball of
 //! radius at most the side around any point lies in the 27 cells around the point's cell.
 //!
-//! Points of one cell share those 27 cells: a search for every binned point goes cell by cell
-//! ([`VoxelGrid::around_cell`]), looking the 27 cells up once per cell instead of once per
-//! point.
+//! Points of one cell share those 27 cells: a search for every binned point goes cell by cell,
+//! with the occupied cells around every cell found at once by merging the sorted keys
+//! ([`VoxelGrid::neighbourhoods`]) instead of 27 hash lookups per cell or per point.
 
 use glam::Vec3;
 use rustc_hash::FxHashMap;
@@ -99,20 +99,14 @@ impl VoxelGrid {
         (&self.members[range.clone()], &self.slots[range])
     }
 
-    /// Calls `visit` with the binned points of each occupied cell among the 27 around cell `c`
-    /// (`c < cell_count()`), in the order [`VoxelGrid::for_each_near`] visits them for a point
-    /// of cell `c`.
-    pub(crate) fn around_cell(&self, c: usize, visit: impl FnMut(&[u32])) {
-        self.around_key(self.keys[c], visit);
-    }
-
     /// The key of the cell `p` falls in, occupied or not.
     pub(crate) fn key_of(&self, p: Vec3) -> [i32; 3] {
         cell_of(p, self.inv_cell_m)
     }
 
-    /// [`VoxelGrid::around_cell`] for the cell of key `c` (see [`VoxelGrid::key_of`]).
-    pub(crate) fn around_key(&self, c: Cell, mut visit: impl FnMut(&[u32])) {
+    /// Calls `visit` with each occupied cell (by id) among the 27 around the cell of key `c`
+    /// (see [`VoxelGrid::key_of`]), in the order [`VoxelGrid::for_each_near`] visits them.
+    pub(crate) fn around_key(&self, c: Cell, mut visit: impl FnMut(u32)) {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
@@ -122,21 +116,76 @@ impl VoxelGrid {
                         c[2].saturating_add(dz),
                     ];
                     if let Some(&id) = self.cell_ids.get(&key) {
-                        visit(self.cell(id as usize).0);
+                        visit(id);
                     }
                 }
             }
         }
     }
 
+    /// The occupied cells around every occupied cell, as [`VoxelGrid::around_key`] finds
+    /// them for one: the keys are sorted once, and the cells of each of the nine columns
+    /// around a cell (its x, y offsets) are the next keys of a cursor through the sorted keys
+    /// for that column, which only moves forward as the cells are taken in key order.
+    pub(crate) fn neighbourhoods(&self) -> Neighbourhoods {
+        let n = self.keys.len();
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        order.sort_unstable_by_key(|&c| self.keys[c as usize]);
+        let sorted: Vec<Cell> = order.iter().map(|&c| self.keys[c as usize]).collect();
+        let mut cursors = [0usize; 9];
+        let mut ranges = vec![(0, 0); n];
+        let mut cells = Vec::with_capacity(9 * n);
+        for (&c, &key) in order.iter().zip(&sorted) {
+            let begin = cells.len() as u32;
+            if key.iter().any(|&x| x == i32::MIN || x == i32::MAX) {
+                // Offsets saturate at the edge of the key space, as `around_key` has them.
+                self.around_key(key, |id| cells.push(id));
+            } else {
+                for (column, cursor) in cursors.iter_mut().enumerate() {
+                    let (dx, dy) = (column as i32 / 3 - 1, column as i32 % 3 - 1);
+                    let lowest = [key[0] + dx, key[1] + dy, key[2] - 1];
+                    while *cursor < n && sorted[*cursor] < lowest {
+                        *cursor += 1;
+                    }
+                    for k in *cursor..(*cursor + 3).min(n) {
+                        let other = sorted[k];
+                        if other[..2] != lowest[..2] || other[2] > key[2] + 1 {
+                            break;
+                        }
+                        cells.push(order[k]);
+                    }
+                }
+            }
+            ranges[c as usize] = (begin, cells.len() as u32);
+        }
+        Neighbourhoods { ranges, cells }
+    }
+
     /// Calls `visit` with every binned point in the 27 cells around `p`'s cell (a superset of
     /// the binned points within one cell side of `p`).
     pub fn for_each_near(&self, p: Vec3, mut visit: impl FnMut(u32)) {
-        self.around_key(cell_of(p, self.inv_cell_m), |members| {
-            for &j in members {
+        self.around_key(cell_of(p, self.inv_cell_m), |id| {
+            for &j in self.cell(id as usize).0 {
                 visit(j);
             }
         });
+    }
+}
+
+/// The occupied cells among the 27 around each occupied cell of a [`VoxelGrid`]
+/// ([`VoxelGrid::neighbourhoods`]).
+pub(crate) struct Neighbourhoods {
+    /// `cells[ranges[c].0..ranges[c].1]` for cell `c`.
+    ranges: Vec<(u32, u32)>,
+    cells: Vec<u32>,
+}
+
+impl Neighbourhoods {
+    /// The occupied cells (by id) around cell `c`, in the order [`VoxelGrid::for_each_near`]
+    /// visits them for a point of cell `c`.
+    pub(crate) fn of(&self, c: usize) -> &[u32] {
+        let (begin, end) = self.ranges[c];
+        &self.cells[begin as usize..end as usize]
     }
 }
 
@@ -183,10 +232,15 @@ mod tests {
             .collect();
         let indices: Vec<u32> = (0..points.len() as u32).filter(|i| i % 3 != 1).collect();
         let grid = VoxelGrid::new(&points, &indices, 0.02);
+        let neighbourhoods = grid.neighbourhoods();
         let mut seen = 0;
         for c in 0..grid.cell_count() {
-            let mut around = Vec::new();
-            grid.around_cell(c, |members| around.extend_from_slice(members));
+            let around: Vec<u32> = neighbourhoods
+                .of(c)
+                .iter()
+                .flat_map(|&id| grid.cell(id as usize).0)
+                .copied()
+                .collect();
             let (members, slots) = grid.cell(c);
             for (&i, &slot) in members.iter().zip(slots) {
                 assert_eq!(indices[slot as usize], i);

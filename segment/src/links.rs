@@ -63,9 +63,12 @@ pub(crate) fn for_each_link(
     for (band, grid) in grids.iter().enumerate() {
         let Some(grid) = grid else { continue };
         let farther = grids.get(band + 1).and_then(Option::as_ref);
+        let neighbourhoods = grid.neighbourhoods();
         for c in 0..grid.cell_count() {
             around.clear();
-            grid.around_cell(c, |m| around.extend_from_slice(m));
+            for &id in neighbourhoods.of(c) {
+                around.extend_from_slice(grid.cell(id as usize).0);
+            }
             for &i in grid.cell(c).0 {
                 let p = points[i as usize];
                 let a = slot[i as usize];
@@ -92,7 +95,9 @@ pub(crate) fn for_each_link(
                 if farther_key != Some((band, key)) {
                     farther_key = Some((band, key));
                     farther_around.clear();
-                    farther.around_key(key, |m| farther_around.extend_from_slice(m));
+                    farther.around_key(key, |id| {
+                        farther_around.extend_from_slice(farther.cell(id as usize).0)
+                    });
                 }
                 for &j in &farther_around {
                     let q = points[j as usize];
