@@ -22,6 +22,7 @@ use glam::{DMat3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use tacmesh_reconstruct::moments::smallest_eigenvector;
 
+use crate::grid::floor_i32;
 use crate::range::RangeDistance;
 
 /// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
@@ -89,18 +90,29 @@ const AREA_CELL_M: f32 = 0.04;
 /// diagonals.
 fn extent_and_area(points: &[Vec3], inliers: &[u32], n: Vec3) -> (f32, f32) {
     let (u, v) = plane_basis(n);
-    let mut squares: Vec<(i32, i32)> = inliers
+    // Sorted as one integer each (the order of the pairs), which compares in one step.
+    let mut keys: Vec<u64> = inliers
         .iter()
         .map(|&i| {
             let p = points[i as usize];
+            let (a, b) = (
+                floor_i32(u.dot(p) / AREA_CELL_M),
+                floor_i32(v.dot(p) / AREA_CELL_M),
+            );
+            (u64::from(a as u32 ^ SIGN) << 32) | u64::from(b as u32 ^ SIGN)
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let squares: Vec<(i32, i32)> = keys
+        .into_iter()
+        .map(|key| {
             (
-                (u.dot(p) / AREA_CELL_M).floor() as i32,
-                (v.dot(p) / AREA_CELL_M).floor() as i32,
+                ((key >> 32) as u32 ^ SIGN) as i32,
+                (key as u32 ^ SIGN) as i32,
             )
         })
         .collect();
-    squares.sort_unstable();
-    squares.dedup();
     let mut seen = vec![false; squares.len()];
     let mut best: Vec<(i32, i32)> = Vec::new();
     for start in 0..squares.len() {
@@ -313,6 +325,29 @@ fn simplify_hull(hull: &mut Vec<Vec2>, tolerance_m: f32) {
     }
 }
 
+/// Flipping the sign bit orders `i32`s as `u32`s.
+const SIGN: u32 = 1 << 31;
+
+/// The bits of `x`, turned so that their order as integers is `f32::total_cmp`'s: a positive
+/// float's sign bit set, a negative float's bits all flipped.
+fn ordered_bits(x: f32) -> u32 {
+    let bits = x.to_bits();
+    if bits & SIGN == 0 {
+        bits | SIGN
+    } else {
+        !bits
+    }
+}
+
+/// The float of [`ordered_bits`].
+fn from_ordered_bits(bits: u32) -> f32 {
+    f32::from_bits(if bits & SIGN != 0 {
+        bits & !SIGN
+    } else {
+        !bits
+    })
+}
+
 /// Convex hull of the inliers projected onto the plane, by Andrew's monotone chain (Andrew,
 /// "Another efficient algorithm for convex hulls in two dimensions", IPL 1979), lifted back to
 /// 3-D, with corners flatter than [`OUTLINE_TOLERANCE_M`] dropped. Counter-clockwise about `n`.
@@ -325,7 +360,19 @@ fn outline_on_plane(points: &[Vec3], inliers: &[u32], n: Vec3, d: f32) -> Vec<Ve
             Vec2::new(u.dot(p), v.dot(p))
         })
         .collect();
-    flat.sort_unstable_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    // By x, then y, in `total_cmp`'s order, as one integer each.
+    let mut keys: Vec<u64> = flat
+        .iter()
+        .map(|q| (u64::from(ordered_bits(q.x)) << 32) | u64::from(ordered_bits(q.y)))
+        .collect();
+    keys.sort_unstable();
+    flat.clear();
+    flat.extend(keys.into_iter().map(|key| {
+        Vec2::new(
+            from_ordered_bits((key >> 32) as u32),
+            from_ordered_bits(key as u32),
+        )
+    }));
     flat.dedup();
     if flat.len() < 3 {
         return Vec::new();
@@ -498,6 +545,32 @@ fn difference(a: &[u32], b: &[u32]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ordered_bits_order_as_total_cmp_and_round_trip() {
+        let values = [
+            f32::NEG_INFINITY,
+            -3.5,
+            -f32::MIN_POSITIVE,
+            -0.0,
+            0.0,
+            1e-40,
+            0.25,
+            7.0,
+            f32::INFINITY,
+            f32::NAN,
+        ];
+        for a in values {
+            assert_eq!(from_ordered_bits(ordered_bits(a)).to_bits(), a.to_bits());
+            for b in values {
+                assert_eq!(
+                    ordered_bits(a).cmp(&ordered_bits(b)),
+                    a.total_cmp(&b),
+                    "{a} {b}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn fit_plane_recovers_a_tilted_plane() {
