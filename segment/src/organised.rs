@@ -80,14 +80,12 @@ pub fn segment_organised_timed(
     } else {
         config.clone()
     };
-    let sub: Vec<Vec3> = (0..height)
-        .step_by(stride)
-        .flat_map(|v| {
-            (0..width)
-                .step_by(stride)
-                .map(move |u| points[v * width + u])
-        })
-        .collect();
+    let mut sub: Vec<Vec3> = Vec::with_capacity(height.div_ceil(stride) * sub_width);
+    if width > 0 {
+        for row in points[..height * width].chunks_exact(width).step_by(stride) {
+            sub.extend(row.iter().step_by(stride));
+        }
+    }
     let gathered = clock.elapsed();
     let (strided, mut times) = segment_timed(&sub, &config, hints);
     times.organised = gathered;
@@ -97,6 +95,7 @@ pub fn segment_organised_timed(
     }
 
     let clock = Instant::now();
+    let band = crate::plane_band(&config);
     let mut objects = vec![Vec::new(); strided.objects.len()];
     for v in 0..height {
         // The strided pixels of this row's blocks; the pixels of an unlabelled block are not
@@ -116,7 +115,7 @@ pub fn segment_organised_timed(
                 if !p.is_finite() || p.distance(anchor) > LABEL_SPREAD_M {
                     continue;
                 }
-                let band_m = config.plane_distance_at(p);
+                let band_m = band.at(p);
                 let on_plane = strided
                     .planes
                     .iter()
@@ -201,6 +200,15 @@ mod tests {
         let plain = crate::segment(&points, &config);
         assert_eq!(organised.strided, plain);
         assert_eq!(organised.objects, plain.objects);
+    }
+
+    #[test]
+    fn an_empty_image_is_no_objects() {
+        let (points, _, _) = table_with_cube();
+        for (width, height) in [(0, 90), (120, 0), (0, 0)] {
+            let organised = segment_organised(&points, width, height, 2, &looking_down(), &[]);
+            assert!(organised.objects.is_empty(), "{width}×{height}");
+        }
     }
 
     #[test]
