@@ -13,8 +13,9 @@
 //!   defaults in the same process.
 //!
 //! Each figure is the median of `--runs` runs (default 15) after one warm-up, per stage (each
-//! stage's own median) and in total (the median of the totals). A first argument that is not
-//! an option keeps only the scenes whose name contains it. For instruction counts, which do
+//! stage's own median) and in total (the median of the totals), on a pool of `--threads`
+//! threads (default 1). An argument that is not an option keeps only the scenes whose name
+//! contains it. For instruction counts, which do
 //! not depend on the machine's load, run one hinted frame under callgrind and count only the
 //! measured runs:
 //!
@@ -201,6 +202,7 @@ fn recording(name: &str) -> Organised {
 fn main() {
     let mut filter = String::new();
     let mut runs = RUNS;
+    let mut threads = 1;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         match arg.as_str() {
@@ -208,6 +210,13 @@ fn main() {
                 Some(n) if n > 0 => runs = n,
                 _ => {
                     eprintln!("--runs needs a positive number");
+                    return;
+                }
+            },
+            "--threads" => match args.next().and_then(|n| n.parse().ok()) {
+                Some(n) if n > 0 => threads = n,
+                _ => {
+                    eprintln!("--threads needs a positive number");
                     return;
                 }
             },
@@ -222,10 +231,10 @@ fn main() {
     }
     let wanted = |scene: &str| scene.contains(&filter);
 
-    // One thread, as in the daemon (the other core fuses the previous frame).
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build();
+    // One thread by default, as in the daemon (the other core fuses the previous frame).
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
     let Ok(pool) = pool else {
-        eprintln!("cannot build a one-thread pool");
+        eprintln!("cannot build a pool of {threads} threads");
         return;
     };
     pool.install(|| {
