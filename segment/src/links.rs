@@ -19,7 +19,7 @@
 use glam::Vec3;
 
 use crate::grid::VoxelGrid;
-use crate::range::RangeDistance;
+use crate::range::{RangeDistance, MAX_BAND};
 
 /// Calls `visit(a, b)` once for each linked pair of `indices` (ascending indices of finite
 /// points), with `a` and `b` their positions in `indices`: pairs within `reach` of each other
@@ -63,6 +63,17 @@ pub(crate) fn for_each_link(
     for (band, grid) in grids.iter().enumerate() {
         let Some(grid) = grid else { continue };
         let farther = grids.get(band + 1).and_then(Option::as_ref);
+        // A point of the farther band is at least `band_start_m` away and reaches at most
+        // 2^(band + 1) base distances (but the last band, which has no bound): points nearer
+        // than that by more than the reach (and a margin well above rounding) have no link
+        // there and do not search it.
+        let farther_reach_m = base_m * (1u32 << (band + 1)) as f32;
+        let search_farther_from_m = if band + 1 < MAX_BAND {
+            let start_m = reach.band_start_m(band + 1);
+            start_m - farther_reach_m - (1e-3 * start_m + 1e-4)
+        } else {
+            0.0
+        };
         let neighbourhoods = grid.neighbourhoods();
         for c in 0..grid.cell_count() {
             around.clear();
@@ -91,6 +102,9 @@ pub(crate) fn for_each_link(
                     }
                 }
                 let Some(farther) = farther else { continue };
+                if p.distance(reach.viewpoint) < search_farther_from_m {
+                    continue;
+                }
                 let key = farther.key_of(p);
                 if farther_key != Some((band, key)) {
                     farther_key = Some((band, key));
