@@ -35,6 +35,7 @@ use std::collections::BinaryHeap;
 use glam::{DMat4, DVec4, Vec3};
 use rustc_hash::FxHashMap;
 
+use crate::grid::floor_i32;
 use crate::links::Links as CellLinks;
 use crate::planes::fit_plane;
 
@@ -153,20 +154,16 @@ fn grow_patches(
     /// settings; 1 − cos 30° ≈ 0.13 then costs half a patch's width).
     const NORMAL_WEIGHT: f32 = 4.0;
     // The seed of each occupied grid square: the cell nearest the square's centre.
-    let mut nearest: FxHashMap<[i32; 4], (f32, u32)> = FxHashMap::default();
+    let mut nearest: FxHashMap<[i32; 4], (f32, u32)> =
+        FxHashMap::with_capacity_and_hasher(cluster.len(), Default::default());
     for (k, &c) in cluster.iter().enumerate() {
         let p = centroids[c as usize];
         let side = seed_m(p);
         let q = p / side;
-        let key_f = q.floor();
+        let square = [floor_i32(q.x), floor_i32(q.y), floor_i32(q.z)];
         // Squares of different sides do not share keys: the side is part of the key.
-        let key = [
-            key_f.x as i32,
-            key_f.y as i32,
-            key_f.z as i32,
-            side.to_bits() as i32,
-        ];
-        let d = (q - key_f - Vec3::splat(0.5)).length_squared();
+        let key = [square[0], square[1], square[2], side.to_bits() as i32];
+        let d = (q - floored(q, square) - Vec3::splat(0.5)).length_squared();
         let entry = nearest.entry(key).or_insert((f32::INFINITY, u32::MAX));
         if (d, k as u32) < *entry {
             *entry = (d, k as u32);
@@ -179,11 +176,14 @@ fn grow_patches(
     let mut cost = vec![f32::INFINITY; cluster.len()];
     // (cost, cell position, patch): the order of equal costs is by position and patch, so
     // the result does not depend on hash order.
-    let mut heap: BinaryHeap<Reverse<(OrderedCost, u32, u32)>> = BinaryHeap::new();
-    for (s, &k) in seeds.iter().enumerate() {
+    for &k in &seeds {
         cost[k as usize] = 0.0;
-        heap.push(Reverse((OrderedCost(0.0), k, s as u32)));
     }
+    let mut heap: BinaryHeap<Reverse<(OrderedCost, u32, u32)>> = seeds
+        .iter()
+        .enumerate()
+        .map(|(s, &k)| Reverse((OrderedCost(0.0), k, s as u32)))
+        .collect();
     while let Some(Reverse((OrderedCost(c), k, s))) = heap.pop() {
         if patch[k as usize] != u32::MAX {
             continue;
@@ -210,6 +210,19 @@ fn grow_patches(
         }
     }
     (patch, seeds.len())
+}
+
+/// `q.floor()` from `square`, its components floored to integers (by `floor_i32`), without
+/// calling `floorf`: the same values, but that a negative zero may come out positive (which
+/// no difference from it tells apart).
+fn floored(q: Vec3, square: [i32; 3]) -> Vec3 {
+    // Beyond 2^23 every float is an integer, and its own floor.
+    let exact = |x: f32, k: i32| if x.abs() < 8_388_608.0 { k as f32 } else { x };
+    Vec3::new(
+        exact(q.x, square[0]),
+        exact(q.y, square[1]),
+        exact(q.z, square[2]),
+    )
 }
 
 /// A finite, non-negative cost, totally ordered for the heap.
