@@ -250,20 +250,17 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
     Some((n.as_vec3(), n.dot(centroid) as f32))
 }
 
-/// Candidates within the inlier distance (at their range) of the plane.
+/// Candidates within their inlier distance (`band_m[i]` for point `i`) of the plane.
 fn inliers_of(
     points: &[Vec3],
     candidates: &[u32],
     (n, d): (Vec3, f32),
-    band: &RangeDistance,
+    band_m: &[f32],
 ) -> Vec<u32> {
     candidates
         .par_iter()
         .copied()
-        .filter(|&i| {
-            let p = points[i as usize];
-            (n.dot(p) - d).abs() <= band.at(p)
-        })
+        .filter(|&i| (n.dot(points[i as usize]) - d).abs() <= band_m[i as usize])
         .collect()
 }
 
@@ -272,9 +269,9 @@ fn refine(
     points: &[Vec3],
     candidates: &[u32],
     mut plane: (Vec3, f32),
-    band: &RangeDistance,
+    band_m: &[f32],
 ) -> ((Vec3, f32), Vec<u32>) {
-    let mut inliers = inliers_of(points, candidates, plane, band);
+    let mut inliers = inliers_of(points, candidates, plane, band_m);
     for _ in 0..3 {
         let Some(fitted) = fit_plane(points, &inliers) else {
             break;
@@ -282,7 +279,7 @@ fn refine(
         // Always take the fit, even if it holds a few points fewer: a hypothesis tilted within
         // the threshold can hold more (the feet of objects) and still be the worse plane.
         plane = fitted;
-        inliers = inliers_of(points, candidates, fitted, band);
+        inliers = inliers_of(points, candidates, fitted, band_m);
     }
     (plane, inliers)
 }
@@ -428,6 +425,11 @@ pub(crate) fn find_planes(
     hints: &[(Vec3, f32)],
 ) -> Vec<SupportPlane> {
     let viewpoint = band.viewpoint;
+    // Each candidate's inlier distance, which every refinement reads again.
+    let mut band_m = vec![0.0; points.len()];
+    for &i in candidates {
+        band_m[i as usize] = band.at(points[i as usize]);
+    }
     let mut rng = XorShift::new(seed);
     let mut remaining: Vec<u32> = candidates.to_vec();
     let mut planes = Vec::new();
@@ -437,7 +439,7 @@ pub(crate) fn find_planes(
     while planes.len() < max_planes && remaining.len() >= min_inliers {
         // A hint that still holds enough points after refinement saves the RANSAC search.
         let hinted = hints.by_ref().find_map(|&hint| {
-            let (plane, inliers) = refine(points, &remaining, hint, band);
+            let (plane, inliers) = refine(points, &remaining, hint, &band_m);
             (inliers.len() >= min_inliers).then_some((plane, inliers))
         });
         if let Some(((n, d), inliers)) = hinted {
@@ -457,10 +459,7 @@ pub(crate) fn find_planes(
         searches_left -= 1;
         // A fixed random scoring subset (with replacement; duplicates are harmless), each point
         // with its inlier distance.
-        let with_band = |i: u32| {
-            let p = points[i as usize];
-            (p, band.at(p))
-        };
+        let with_band = |i: u32| (points[i as usize], band_m[i as usize]);
         let sample: Vec<(Vec3, f32)> = if remaining.len() <= SCORE_SAMPLE {
             remaining.iter().map(|&i| with_band(i)).collect()
         } else {
@@ -483,7 +482,7 @@ pub(crate) fn find_planes(
             // Ties go to the earliest hypothesis so that the result is deterministic.
             .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
         let Some((_, k)) = best else { break };
-        let (plane, inliers) = refine(points, &remaining, hypotheses[k], band);
+        let (plane, inliers) = refine(points, &remaining, hypotheses[k], &band_m);
         if inliers.len() < min_inliers {
             break;
         }
