@@ -10,7 +10,8 @@
 //!
 //! Stages, one function each, in the order they run:
 //! 1. `link_cells`: the cluster's cells (voxel centroids) and the pairs of them within the
-//!    linking distance (the same links Euclidean clustering uses).
+//!    linking distance: the links Euclidean clustering found (`links.rs`), taken, not
+//!    searched again.
 //! 2. Each cell's normal, from the plane through its neighbours within a radius (Hoppe et
 //!    al. 1992), turned towards the sensor: the crease test's local planes (`creases.rs`),
 //!    computed once for both.
@@ -385,10 +386,14 @@ fn join_patches(
         let Some(small) = lightest else { break };
         let into = between
             .iter()
-            .filter_map(|&((a, b), (_, links))| match small {
-                _ if small == a => Some((b, links)),
-                _ if small == b => Some((a, links)),
-                _ => None,
+            .filter_map(|&((a, b), (_, links))| {
+                if a == small {
+                    Some((b, links))
+                } else if b == small {
+                    Some((a, links))
+                } else {
+                    None
+                }
             })
             .max_by_key(|&(other, links)| (links, Reverse(other)))
             .map(|(other, _)| other);
