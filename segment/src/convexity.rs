@@ -334,6 +334,12 @@ fn join_patches(
 ) -> Vec<u32> {
     let patches = patch_weights.len();
     let mut sets = Sets::new(patch_weights);
+    if connections.iter().all(|&(_, _, joined)| joined) {
+        // Every pair of adjacent pieces agrees, in every round, until no two pieces touch: the
+        // pieces are the components of the connections, whatever order the rounds merge in,
+        // and none is left touching another to join.
+        return components(patches, connections.iter().map(|&(pair, _, _)| pair));
+    }
     // (links through joined connections, all links) between each pair of pieces.
     let mut between: Vec<PiecesLinked> = connections
         .iter()
@@ -401,6 +407,27 @@ fn join_patches(
             Some(other) => sets.union(small, other),
             None => break,
         }
+    }
+    (0..patches as u32).map(|p| sets.find(p)).collect()
+}
+
+/// The cell links between different patches (`patch_of` each cell's, `u32::MAX` for none), as
+/// pairs of patches, the lower first, once per cell link.
+fn patch_links<'a>(patch_of: &'a [u32], links: &'a Links) -> impl Iterator<Item = (u32, u32)> + 'a {
+    patch_of.iter().enumerate().flat_map(move |(k, &a)| {
+        links.of(k).iter().filter_map(move |&j| {
+            let b = patch_of[j as usize];
+            (a < b && b != u32::MAX).then_some((a, b))
+        })
+    })
+}
+
+/// The component of each of `patches` in the graph of the `links` between them (a patch's
+/// component named by one of its patches).
+fn components(patches: usize, links: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
+    let mut sets = Sets::new(vec![1; patches]);
+    for (a, b) in links {
+        sets.union(a, b);
     }
     (0..patches as u32).map(|p| sets.find(p)).collect()
 }
@@ -587,39 +614,40 @@ pub(crate) fn split_at_concave_creases(
         })
         .collect();
 
-    // Adjacent patches, how many cell links join them, and the judgement of each connection,
-    // in the order of the patches.
-    let mut adjacent: Vec<(u32, u32)> = Vec::new();
-    for (k, &a) in patch_of.iter().enumerate() {
-        for &j in links.of(k) {
-            let b = patch_of[j as usize];
-            if a < b && b != u32::MAX {
-                adjacent.push((a, b));
-            }
-        }
-    }
-    adjacent.sort_unstable();
-    let connections: Vec<((u32, u32), u32, bool)> = adjacent
-        .chunk_by(|x, y| x == y)
-        .map(|run| {
-            let (a, b) = run[0];
-            let joined = judge_connection(
-                &patches[a as usize],
-                &patches[b as usize],
-                params.concave_tolerance_deg,
-            );
-            ((a, b), run.len() as u32, joined)
-        })
-        .collect();
-    let mut piece_of = join_patches(patch_weights, &connections, params.min_piece_weight);
-    join_dished(
-        centroids,
-        cluster,
-        &patch_of,
-        &links,
-        &mut piece_of,
-        params.viewpoint,
-    );
+    let piece_of = if patches.iter().all(|patch| patch.normal == Vec3::ZERO) {
+        // No patch has a normal to judge by (each has fewer than three cells, as far away,
+        // where cells are as large as patches): every connection is judged joined, so the
+        // pieces are the components of the links between patches (see `join_patches`), and
+        // no two pieces touch for `join_dished` to join.
+        components(patch_count, patch_links(&patch_of, &links))
+    } else {
+        // Adjacent patches, how many cell links join them, and the judgement of each
+        // connection, in the order of the patches.
+        let mut adjacent: Vec<(u32, u32)> = patch_links(&patch_of, &links).collect();
+        adjacent.sort_unstable();
+        let connections: Vec<((u32, u32), u32, bool)> = adjacent
+            .chunk_by(|x, y| x == y)
+            .map(|run| {
+                let (a, b) = run[0];
+                let joined = judge_connection(
+                    &patches[a as usize],
+                    &patches[b as usize],
+                    params.concave_tolerance_deg,
+                );
+                ((a, b), run.len() as u32, joined)
+            })
+            .collect();
+        let mut piece_of = join_patches(patch_weights, &connections, params.min_piece_weight);
+        join_dished(
+            centroids,
+            cluster,
+            &patch_of,
+            &links,
+            &mut piece_of,
+            params.viewpoint,
+        );
+        piece_of
+    };
 
     let mut pieces: FxHashMap<u32, Vec<u32>> = FxHashMap::default();
     for (k, &p) in patch_of.iter().enumerate() {
@@ -787,6 +815,20 @@ mod tests {
             normal: Vec3::new(-(10f32.to_radians().sin()), 0.0, 10f32.to_radians().cos()),
         };
         assert!(judge_connection(&up, &tilted, 20.0));
+    }
+
+    #[test]
+    fn pieces_that_all_agree_are_the_components_of_their_connections() {
+        // Patches 0–2 and 3–4 joined along two chains, 5 alone: three pieces, however small
+        // (no piece touches another to join it).
+        let connections = [((0, 1), 3, true), ((1, 2), 1, true), ((3, 4), 2, true)];
+        let pieces = join_patches(vec![10; 6], &connections, 1000);
+        assert!(pieces[..3].iter().all(|&p| p == pieces[0]));
+        assert_eq!(pieces[3], pieces[4]);
+        let mut distinct = vec![pieces[0], pieces[3], pieces[5]];
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), 3, "{pieces:?}");
     }
 
     #[test]
