@@ -171,6 +171,10 @@ fn grow_patches(
         }
     }
     let mut seeds: Vec<u32> = nearest.values().map(|&(_, k)| k).collect();
+    if seeds.len() == cluster.len() {
+        // Every cell seeds its own patch (far away, where a patch's square holds one cell).
+        return ((0..cluster.len() as u32).collect(), cluster.len());
+    }
     seeds.sort_unstable();
 
     let mut patch = vec![u32::MAX; cluster.len()];
