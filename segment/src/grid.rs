@@ -25,6 +25,9 @@ pub struct VoxelGrid {
     slots: Vec<u32>,
 }
 
+/// Flipping the sign bit orders `i32`s as `u32`s.
+const SIGN: u32 = 1 << 31;
+
 /// `x.floor() as i32`, saturating as that cast does (NaN to 0), without a call to `floorf`:
 /// the baseline x86-64 target has no rounding instruction, and the grids key every point.
 #[inline]
@@ -129,13 +132,26 @@ impl VoxelGrid {
     /// for that column, which only moves forward as the cells are taken in key order.
     pub(crate) fn neighbourhoods(&self) -> Neighbourhoods {
         let n = self.keys.len();
-        let mut order: Vec<u32> = (0..n as u32).collect();
-        order.sort_unstable_by_key(|&c| self.keys[c as usize]);
-        let sorted: Vec<Cell> = order.iter().map(|&c| self.keys[c as usize]).collect();
+        // Each cell as one integer, which orders as its key and compares in two steps: the
+        // key's coordinates (sign bits flipped, to order as unsigned) above the cell's id.
+        let packed = |key: Cell| {
+            key.iter().fold(0u128, |packed, &x| {
+                (packed << 32) | u128::from(x as u32 ^ SIGN)
+            }) << 32
+        };
+        let mut sorted: Vec<u128> = self
+            .keys
+            .iter()
+            .enumerate()
+            .map(|(c, &key)| packed(key) | c as u128)
+            .collect();
+        sorted.sort_unstable();
         let mut cursors = [0usize; 9];
         let mut ranges = vec![(0, 0); n];
         let mut cells = Vec::with_capacity(9 * n);
-        for (&c, &key) in order.iter().zip(&sorted) {
+        for &entry in &sorted {
+            let c = entry as u32 as usize;
+            let key = self.keys[c];
             let begin = cells.len() as u32;
             if key.iter().any(|&x| x == i32::MIN || x == i32::MAX) {
                 // Offsets saturate at the edge of the key space, as `around_key` has them.
@@ -143,20 +159,23 @@ impl VoxelGrid {
             } else {
                 for (column, cursor) in cursors.iter_mut().enumerate() {
                     let (dx, dy) = (column as i32 / 3 - 1, column as i32 % 3 - 1);
-                    let lowest = [key[0] + dx, key[1] + dy, key[2] - 1];
+                    let lowest = packed([key[0] + dx, key[1] + dy, key[2] - 1]);
+                    // Past the column's last cell: the next column's first, or the cell three
+                    // above the lowest.
+                    let highest =
+                        packed([key[0] + dx, key[1] + dy, key[2] + 1]) | u128::from(u32::MAX);
                     while *cursor < n && sorted[*cursor] < lowest {
                         *cursor += 1;
                     }
-                    for k in *cursor..(*cursor + 3).min(n) {
-                        let other = sorted[k];
-                        if other[..2] != lowest[..2] || other[2] > key[2] + 1 {
+                    for &other in sorted[*cursor..(*cursor + 3).min(n)].iter() {
+                        if other > highest {
                             break;
                         }
-                        cells.push(order[k]);
+                        cells.push(other as u32);
                     }
                 }
             }
-            ranges[c as usize] = (begin, cells.len() as u32);
+            ranges[c] = (begin, cells.len() as u32);
         }
         Neighbourhoods { ranges, cells }
     }
