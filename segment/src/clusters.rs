@@ -1,17 +1,18 @@
 //! Euclidean clustering: the connected components of the graph joining two points closer than
 //! a tolerance (single linkage cut at that distance), as PCL's `EuclideanClusterExtraction`
 //! defines them (Rusu, "Semantic 3D object maps for everyday manipulation in human living
-//! environments", 2009, §6.2), found on a voxel hash grid with cells of the tolerance instead
-//! of a k-d tree: a point's neighbours lie in the 27 cells around its cell. Neighbours are
-//! joined in a union–find forest (Tarjan, "Efficiency of a good but not linear set
-//! union algorithm", JACM 1975), so the result does not depend on point order.
+//! environments", 2009, §6.2), found on voxel hash grids with cells of the tolerance instead
+//! of a k-d tree (the links, `links.rs`). Neighbours are joined in a union–find forest
+//! (Tarjan, "Efficiency of a good but not linear set union algorithm", JACM 1975), so the
+//! result does not depend on point order.
 //!
-//! Stages in order: neighbours (on the [`VoxelGrid`]) → `UnionFind` →
-//! [`euclidean_clusters`] (the entry point).
+//! Stages in order: links (`links.rs`) → `UnionFind` → `components`; the entry points are
+//! [`euclidean_clusters`] (searching the links) and [`clusters_of_links`] (links found
+//! beforehand).
 
 use glam::Vec3;
 
-use crate::grid::VoxelGrid;
+use crate::links::{for_each_link, Links};
 use crate::range::RangeDistance;
 
 /// Disjoint sets with path halving and union by size.
@@ -51,18 +52,12 @@ impl UnionFind {
 }
 
 /// Clusters `candidates` (ascending indices of finite points) into groups chained by steps of
-/// at most `tolerance` (at the farther point's range), keeps those with `min_points..=max_points`
-/// points, and returns them largest first (ties: lowest first index first), each ascending.
+/// at most `tolerance` (at the farther point's range; see `links.rs`), keeps those with
+/// `min_points..=max_points` points, and returns them largest first (ties: lowest first index
+/// first), each ascending.
 ///
 /// `weights[i]`, if `weights` is not empty, is how many input points point `i` stands for (a
 /// voxel cell's centroid stands for the points of its cell); sizes are sums of weights.
-///
-/// A tolerance that grows with range is searched in range bands: band 0 holds the points whose
-/// tolerance is the base one, band `k` those whose tolerance is up to `2^k` times it, each on a
-/// grid with cells of its largest tolerance. A point looks for neighbours in its own band's
-/// grid and in the next farther band's, whose cells are large enough for any pair across the
-/// two. Bands two apart are never linked: a band is far deeper than a tolerance (band 1 of the
-/// live settings spans 1.7–2.4 m for tolerances of 15–30 mm), which holds to tens of metres.
 pub(crate) fn euclidean_clusters(
     points: &[Vec3],
     candidates: &[u32],
@@ -71,70 +66,57 @@ pub(crate) fn euclidean_clusters(
     min_points: usize,
     max_points: usize,
 ) -> Vec<Vec<u32>> {
-    let base_m = tolerance.base_m;
-    if candidates.is_empty() || base_m <= 0.0 || !base_m.is_finite() {
+    if candidates.is_empty() || !links_at_all(tolerance) {
         return Vec::new();
     }
-    let bands: Vec<u8> = candidates
-        .iter()
-        .map(|&i| tolerance.band(points[i as usize]) as u8)
-        .collect();
-    let band_count = bands.iter().copied().max().map_or(1, |b| b as usize + 1);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); band_count];
-    for (&i, &b) in candidates.iter().zip(&bands) {
-        members[b as usize].push(i);
-    }
-    let grids: Vec<Option<VoxelGrid>> = members
-        .iter()
-        .enumerate()
-        .map(|(k, m)| {
-            (!m.is_empty()).then(|| VoxelGrid::new(points, m, base_m * (1u32 << k) as f32))
-        })
-        .collect();
-    // Position of each candidate in `candidates`, to index the forest.
-    let mut slot = vec![u32::MAX; points.len()];
+    // Sequential: each link is a union of two (usually already joined) sets, which costs less
+    // than collecting the millions of links a dense scan has for a parallel pass.
+    let mut sets = UnionFind::new(candidates.len());
+    for_each_link(points, candidates, tolerance, |a, b| sets.union(a, b));
+    components(&mut sets, candidates, weights, min_points, max_points)
+}
+
+/// Whether `tolerance` links anything: a zero, negative or non-finite base leaves every point
+/// alone, and no cluster is an object.
+pub(crate) fn links_at_all(tolerance: &RangeDistance) -> bool {
+    tolerance.base_m > 0.0 && tolerance.base_m.is_finite()
+}
+
+/// [`euclidean_clusters`] of `candidates` from the links of every one of the `points`
+/// (`links.of(i)` lists the points linked to point `i`): the same clusters, as the links
+/// among the candidates are the links of all points between two candidates.
+pub(crate) fn clusters_of_links(
+    points: usize,
+    candidates: &[u32],
+    links: &Links,
+    weights: &[u32],
+    min_points: usize,
+    max_points: usize,
+) -> Vec<Vec<u32>> {
+    let mut slot = vec![u32::MAX; points];
     for (k, &i) in candidates.iter().enumerate() {
         slot[i as usize] = k as u32;
     }
-    let fixed_sq = base_m * base_m;
-    // Sequential: each neighbour pair is a union of two (usually already joined) sets, which
-    // costs less than collecting the millions of pairs a dense scan has for a parallel pass.
     let mut sets = UnionFind::new(candidates.len());
-    for (a, (&i, &band)) in candidates.iter().zip(&bands).enumerate() {
-        let p = points[i as usize];
-        let band = band as usize;
-        if let Some(grid) = &grids[band] {
-            let own_sq = if band == 0 {
-                fixed_sq
-            } else {
-                tolerance.at(p).powi(2)
-            };
-            grid.for_each_near(p, |j| {
-                if j > i {
-                    let q = points[j as usize];
-                    let d2 = p.distance_squared(q);
-                    let reach_sq = if band == 0 {
-                        fixed_sq
-                    } else {
-                        own_sq.max(tolerance.at(q).powi(2))
-                    };
-                    if d2 <= reach_sq {
-                        sets.union(a as u32, slot[j as usize]);
-                    }
-                }
-            });
-        }
-        if let Some(Some(farther)) = grids.get(band + 1) {
-            farther.for_each_near(p, |j| {
-                let q = points[j as usize];
-                if p.distance_squared(q) <= tolerance.at(q).powi(2) {
-                    sets.union(a as u32, slot[j as usize]);
-                }
-            });
+    for (a, &i) in candidates.iter().enumerate() {
+        for &j in links.of(i as usize) {
+            if j > i && slot[j as usize] != u32::MAX {
+                sets.union(a as u32, slot[j as usize]);
+            }
         }
     }
+    components(&mut sets, candidates, weights, min_points, max_points)
+}
 
-    // Components to point lists, in ascending point order.
+/// The sets of `candidates` (by position) as point lists in ascending order, those weighing
+/// `min_points..=max_points`, largest first (ties: lowest first index first).
+fn components(
+    sets: &mut UnionFind,
+    candidates: &[u32],
+    weights: &[u32],
+    min_points: usize,
+    max_points: usize,
+) -> Vec<Vec<u32>> {
     let mut cluster_of_root = vec![u32::MAX; candidates.len()];
     let mut clusters: Vec<Vec<u32>> = Vec::new();
     for (k, &i) in candidates.iter().enumerate() {

@@ -10,7 +10,8 @@
 //!
 //! Stages, one function each, in the order they run:
 //! 1. `link_cells`: the cluster's cells (voxel centroids) and the pairs of them within the
-//!    linking distance (the same links Euclidean clustering uses).
+//!    linking distance: the links Euclidean clustering found (`links.rs`), taken, not
+//!    searched again.
 //! 2. Each cell's normal, from the plane through its neighbours within a radius (Hoppe et
 //!    al. 1992), turned towards the sensor: the crease test's local planes (`creases.rs`),
 //!    computed once for both.
@@ -35,7 +36,8 @@ use std::collections::BinaryHeap;
 use glam::{DMat4, DVec4, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::grid::VoxelGrid;
+use crate::grid::floor_i32;
+use crate::links::Links as CellLinks;
 use crate::planes::fit_plane;
 
 /// The settings of [`split_at_concave_creases`].
@@ -83,30 +85,55 @@ impl Links {
     }
 }
 
-/// Stage 1: the pairs of `cluster`'s cells within `link_m(p, q)` of each other (searched on a
-/// grid of `max_link_m`).
-fn link_cells(
-    centroids: &[Vec3],
-    cluster: &[u32],
-    max_link_m: f32,
-    link_m: impl Fn(Vec3, Vec3) -> f32,
-) -> Links {
-    let grid = VoxelGrid::new(centroids, cluster, max_link_m);
-    let mut position = FxHashMap::default();
-    for (k, &c) in cluster.iter().enumerate() {
-        position.insert(c, k as u32);
+/// Values grouped by a key below a bound, each group in the order the values came: `of(k)`.
+struct Grouped {
+    start: Vec<u32>,
+    values: Vec<u32>,
+}
+
+impl Grouped {
+    /// Groups the values of `(key, value)` pairs by key (`key < keys`; pairs keyed `u32::MAX`
+    /// are left out), by counting sort.
+    fn new(keys: usize, pairs: impl Iterator<Item = (u32, u32)> + Clone) -> Self {
+        let mut start = vec![0u32; keys + 1];
+        for (key, _) in pairs.clone() {
+            if key != u32::MAX {
+                start[key as usize + 1] += 1;
+            }
+        }
+        for k in 0..keys {
+            start[k + 1] += start[k];
+        }
+        let mut fill = start.clone();
+        let mut values = vec![0u32; start[keys] as usize];
+        for (key, value) in pairs {
+            if key != u32::MAX {
+                values[fill[key as usize] as usize] = value;
+                fill[key as usize] += 1;
+            }
+        }
+        Self { start, values }
     }
+
+    fn of(&self, key: usize) -> &[u32] {
+        &self.values[self.start[key] as usize..self.start[key + 1] as usize]
+    }
+}
+
+/// Stage 1: the links of `cluster`'s cells among themselves, from the links of all cells
+/// (`cell_links.of(c)`, the cells linked to cell `c`), with `position[c]` the position of
+/// cell `c` in its cluster: a linked cell is in this cluster if this cluster has it there.
+fn link_cells(cluster: &[u32], (cell_links, position): (&CellLinks, &[u32])) -> Links {
     let mut start = Vec::with_capacity(cluster.len() + 1);
     let mut neighbours = Vec::new();
     start.push(0);
     for &c in cluster {
-        let p = centroids[c as usize];
-        grid.for_each_near(p, |j| {
-            let q = centroids[j as usize];
-            if j != c && p.distance_squared(q) <= link_m(p, q).powi(2) {
-                neighbours.push(position[&j]);
+        for &j in cell_links.of(c as usize) {
+            let k = position[j as usize];
+            if cluster.get(k as usize) == Some(&j) {
+                neighbours.push(k);
             }
-        });
+        }
         start.push(neighbours.len() as u32);
     }
     Links { start, neighbours }
@@ -128,37 +155,40 @@ fn grow_patches(
     /// settings; 1 − cos 30° ≈ 0.13 then costs half a patch's width).
     const NORMAL_WEIGHT: f32 = 4.0;
     // The seed of each occupied grid square: the cell nearest the square's centre.
-    let mut nearest: FxHashMap<[i32; 4], (f32, u32)> = FxHashMap::default();
+    let mut nearest: FxHashMap<[i32; 4], (f32, u32)> =
+        FxHashMap::with_capacity_and_hasher(cluster.len(), Default::default());
     for (k, &c) in cluster.iter().enumerate() {
         let p = centroids[c as usize];
         let side = seed_m(p);
         let q = p / side;
-        let key_f = q.floor();
+        let square = [floor_i32(q.x), floor_i32(q.y), floor_i32(q.z)];
         // Squares of different sides do not share keys: the side is part of the key.
-        let key = [
-            key_f.x as i32,
-            key_f.y as i32,
-            key_f.z as i32,
-            side.to_bits() as i32,
-        ];
-        let d = (q - key_f - Vec3::splat(0.5)).length_squared();
+        let key = [square[0], square[1], square[2], side.to_bits() as i32];
+        let d = (q - floored(q, square) - Vec3::splat(0.5)).length_squared();
         let entry = nearest.entry(key).or_insert((f32::INFINITY, u32::MAX));
         if (d, k as u32) < *entry {
             *entry = (d, k as u32);
         }
     }
     let mut seeds: Vec<u32> = nearest.values().map(|&(_, k)| k).collect();
+    if seeds.len() == cluster.len() {
+        // Every cell seeds its own patch (far away, where a patch's square holds one cell).
+        return ((0..cluster.len() as u32).collect(), cluster.len());
+    }
     seeds.sort_unstable();
 
     let mut patch = vec![u32::MAX; cluster.len()];
     let mut cost = vec![f32::INFINITY; cluster.len()];
     // (cost, cell position, patch): the order of equal costs is by position and patch, so
     // the result does not depend on hash order.
-    let mut heap: BinaryHeap<Reverse<(OrderedCost, u32, u32)>> = BinaryHeap::new();
-    for (s, &k) in seeds.iter().enumerate() {
+    for &k in &seeds {
         cost[k as usize] = 0.0;
-        heap.push(Reverse((OrderedCost(0.0), k, s as u32)));
     }
+    let mut heap: BinaryHeap<Reverse<(OrderedCost, u32, u32)>> = seeds
+        .iter()
+        .enumerate()
+        .map(|(s, &k)| Reverse((OrderedCost(0.0), k, s as u32)))
+        .collect();
     while let Some(Reverse((OrderedCost(c), k, s))) = heap.pop() {
         if patch[k as usize] != u32::MAX {
             continue;
@@ -185,6 +215,19 @@ fn grow_patches(
         }
     }
     (patch, seeds.len())
+}
+
+/// `q.floor()` from `square`, its components floored to integers (by `floor_i32`), without
+/// calling `floorf`: the same values, but that a negative zero may come out positive (which
+/// no difference from it tells apart).
+fn floored(q: Vec3, square: [i32; 3]) -> Vec3 {
+    // Beyond 2^23 every float is an integer, and its own floor.
+    let exact = |x: f32, k: i32| if x.abs() < 8_388_608.0 { k as f32 } else { x };
+    Vec3::new(
+        exact(q.x, square[0]),
+        exact(q.y, square[1]),
+        exact(q.z, square[2]),
+    )
 }
 
 /// A finite, non-negative cost, totally ordered for the heap.
@@ -295,30 +338,40 @@ fn join_patches(
 ) -> Vec<u32> {
     let patches = patch_weights.len();
     let mut sets = Sets::new(patch_weights);
+    if connections.iter().all(|&(_, _, joined)| joined) {
+        // Every pair of adjacent pieces agrees, in every round, until no two pieces touch: the
+        // pieces are the components of the connections, whatever order the rounds merge in,
+        // and none is left touching another to join.
+        return components(patches, connections.iter().map(|&(pair, _, _)| pair));
+    }
+    // (links through joined connections, all links) between each pair of pieces.
+    let mut between: Vec<PiecesLinked> = connections
+        .iter()
+        .map(|&(pair, links, joined)| (pair, (if joined { links } else { 0 }, links)))
+        .collect();
     loop {
-        // (links through joined connections, all links) between each pair of pieces.
-        let mut between: FxHashMap<(u32, u32), (u32, u32)> = FxHashMap::default();
-        for &((a, b), links, joined) in connections {
-            let (ra, rb) = (sets.find(a), sets.find(b));
-            if ra != rb {
-                let entry = between.entry((ra.min(rb), ra.max(rb))).or_default();
-                entry.1 += links;
-                if joined {
-                    entry.0 += links;
-                }
-            }
-        }
-        let mut agreeing: Vec<(f32, u32, (u32, u32))> = between
-            .into_iter()
+        contract(&mut between, &mut sets);
+        // The best-agreeing pairs first (the larger share of joined links, then more links,
+        // then the lower pair), as one integer to sort by: a share above one half is a
+        // positive float, whose bits order as it does.
+        let mut agreeing: Vec<u128> = between
+            .iter()
             .filter(|(_, (joined, all))| 2 * joined > *all)
-            .map(|(pair, (joined, all))| (joined as f32 / all as f32, all, pair))
+            .map(|&((a, b), (joined, all))| {
+                let share = joined as f32 / all as f32;
+                (u128::from(!share.to_bits()) << 96)
+                    | (u128::from(!all) << 64)
+                    | (u128::from(a) << 32)
+                    | u128::from(b)
+            })
             .collect();
         if agreeing.is_empty() {
             break;
         }
-        agreeing.sort_by(|x, y| y.0.total_cmp(&x.0).then(y.1.cmp(&x.1)).then(x.2.cmp(&y.2)));
+        agreeing.sort_unstable();
         let mut merged = vec![false; patches];
-        for (_, _, (a, b)) in agreeing {
+        for key in agreeing {
+            let (a, b) = ((key >> 32) as u32, key as u32);
             if !merged[a as usize] && !merged[b as usize] {
                 merged[a as usize] = true;
                 merged[b as usize] = true;
@@ -327,37 +380,84 @@ fn join_patches(
         }
     }
     loop {
-        let mut shared: FxHashMap<(u32, u32), u32> = FxHashMap::default();
-        for &((a, b), links, _) in connections {
-            let (ra, rb) = (sets.find(a), sets.find(b));
-            if ra != rb {
-                *shared.entry((ra, rb)).or_default() += links;
-                *shared.entry((rb, ra)).or_default() += links;
-            }
-        }
+        contract(&mut between, &mut sets);
         let mut patches_in = vec![0usize; patches];
         for p in 0..patches as u32 {
             patches_in[sets.find(p) as usize] += 1;
         }
-        let lightest = shared
-            .keys()
-            .map(|&(piece, _)| piece)
-            .filter(|&r| {
-                sets.weight[r as usize] < min_weight || patches_in[r as usize] < MIN_PIECE_PATCHES
-            })
+        let small = |r: u32| {
+            sets.weight[r as usize] < min_weight || patches_in[r as usize] < MIN_PIECE_PATCHES
+        };
+        let lightest = between
+            .iter()
+            .flat_map(|&((a, b), _)| [a, b])
+            .filter(|&r| small(r))
             .min_by_key(|&r| (sets.weight[r as usize], r));
         let Some(small) = lightest else { break };
-        let into = shared
+        let into = between
             .iter()
-            .filter(|(&(piece, _), _)| piece == small)
-            .max_by_key(|(&(_, other), &links)| (links, Reverse(other)))
-            .map(|(&(_, other), _)| other);
+            .filter_map(|&((a, b), (_, links))| {
+                if a == small {
+                    Some((b, links))
+                } else if b == small {
+                    Some((a, links))
+                } else {
+                    None
+                }
+            })
+            .max_by_key(|&(other, links)| (links, Reverse(other)))
+            .map(|(other, _)| other);
         match into {
             Some(other) => sets.union(small, other),
             None => break,
         }
     }
     (0..patches as u32).map(|p| sets.find(p)).collect()
+}
+
+/// The cell links between different patches (`patch_of` each cell's, `u32::MAX` for none), as
+/// pairs of patches, the lower first, once per cell link.
+fn patch_links<'a>(patch_of: &'a [u32], links: &'a Links) -> impl Iterator<Item = (u32, u32)> + 'a {
+    patch_of.iter().enumerate().flat_map(move |(k, &a)| {
+        links.of(k).iter().filter_map(move |&j| {
+            let b = patch_of[j as usize];
+            (a < b && b != u32::MAX).then_some((a, b))
+        })
+    })
+}
+
+/// The component of each of `patches` in the graph of the `links` between them (a patch's
+/// component named by one of its patches).
+fn components(patches: usize, links: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
+    let mut sets = Sets::new(vec![1; patches]);
+    for (a, b) in links {
+        sets.union(a, b);
+    }
+    (0..patches as u32).map(|p| sets.find(p)).collect()
+}
+
+/// Two pieces (the lower first) and the links between them: (through connections judged
+/// joined, all).
+type PiecesLinked = ((u32, u32), (u32, u32));
+
+/// Keys `between` by the pieces' current roots, drops the links inside a piece and sums those
+/// between the same two pieces: the list shrinks as pieces merge, where recounting every
+/// connection each round cost the split most of its time.
+fn contract(between: &mut Vec<PiecesLinked>, sets: &mut Sets) {
+    for ((a, b), _) in between.iter_mut() {
+        let (ra, rb) = (sets.find(*a), sets.find(*b));
+        (*a, *b) = (ra.min(rb), ra.max(rb));
+    }
+    between.retain(|((a, b), _)| a != b);
+    between.sort_unstable_by_key(|&(pair, _)| pair);
+    between.dedup_by(|later, kept| {
+        let same = later.0 == kept.0;
+        if same {
+            kept.1 .0 += later.1 .0;
+            kept.1 .1 += later.1 .1;
+        }
+        same
+    });
 }
 
 /// The mean curvature, in 1/m, of the quadric `h = a x² + b xy + c y² + d` fitted by least
@@ -463,16 +563,17 @@ fn join_dished(
 /// Splits one cluster (indices into `centroids`, each cell standing for `weights[c]` points
 /// and with the unit normal `cell_normals[c]` towards the sensor, zero if undetermined) at
 /// its concave creases; returns the pieces, each ascending, heaviest first. A cluster with
-/// no concave crease comes back whole. `cell_m(p)` is the side of the cell at `p`, and
-/// `link_m(p, q)` the linking distance of the clustering.
+/// no concave crease comes back whole. `links` are the clustering's links of every cell
+/// (`links.rs`) and each cell's position in its cluster (see `link_cells`); `cell_m(p)` is
+/// the side of the cell at `p`.
 pub(crate) fn split_at_concave_creases(
     centroids: &[Vec3],
     weights: &[u32],
     cell_normals: &[Vec3],
     cluster: &[u32],
+    links: (&CellLinks, &[u32]),
     params: &ConvexityParams,
     cell_m: impl Fn(Vec3) -> f32,
-    link_m: impl Fn(Vec3, Vec3) -> f32,
 ) -> Vec<Vec<u32>> {
     if cluster.len() < 4 || !params.enabled() {
         return vec![cluster.to_vec()];
@@ -484,33 +585,27 @@ pub(crate) fn split_at_concave_creases(
             PATCH_DEPTH_STEPS * params.range_step_per_m2 * p.distance_squared(params.viewpoint);
         params.patch_m.max(3.0 * cell_m(p)).max(steps_m)
     };
-    let max_link = cluster.iter().fold(0.0f32, |m, &c| {
-        let p = centroids[c as usize];
-        m.max(link_m(p, p))
-    });
-    let links = link_cells(centroids, cluster, max_link, &link_m);
+    let links = link_cells(cluster, links);
     let normals: Vec<Vec3> = cluster
         .iter()
         .map(|&c| cell_normals.get(c as usize).copied().unwrap_or(Vec3::ZERO))
         .collect();
     let (patch_of, patch_count) = grow_patches(centroids, cluster, &links, &normals, seed_m);
 
-    // Each patch's weight, centroid and normal (the plane through its cells).
+    // Each patch's cells (in cluster order), weight, centroid and normal (the plane through
+    // its cells).
     let weight_of = |c: u32| weights.get(c as usize).map_or(1, |&w| w as usize);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); patch_count];
-    for (k, &p) in patch_of.iter().enumerate() {
-        if p != u32::MAX {
-            members[p as usize].push(cluster[k]);
-        }
-    }
-    let patch_weights: Vec<usize> = members
-        .iter()
-        .map(|m| m.iter().map(|&c| weight_of(c)).sum())
+    let members = Grouped::new(
+        patch_count,
+        patch_of.iter().zip(cluster).map(|(&p, &c)| (p, c)),
+    );
+    let patch_weights: Vec<usize> = (0..patch_count)
+        .map(|p| members.of(p).iter().map(|&c| weight_of(c)).sum())
         .collect();
-    let patches: Vec<Patch> = members
-        .iter()
+    let patches: Vec<Patch> = (0..patch_count)
         .zip(&patch_weights)
-        .map(|(m, &w)| {
+        .map(|(p, &w)| {
+            let m = members.of(p);
             let centroid = m.iter().fold(Vec3::ZERO, |s, &c| {
                 s + centroids[c as usize] * weight_of(c) as f32
             }) / w.max(1) as f32;
@@ -523,37 +618,40 @@ pub(crate) fn split_at_concave_creases(
         })
         .collect();
 
-    // Adjacent patches, how many cell links join them, and the judgement of each connection.
-    let mut links_between: FxHashMap<(u32, u32), u32> = FxHashMap::default();
-    for (k, &a) in patch_of.iter().enumerate() {
-        for &j in links.of(k) {
-            let b = patch_of[j as usize];
-            if a < b && b != u32::MAX {
-                *links_between.entry((a, b)).or_default() += 1;
-            }
-        }
-    }
-    let mut connections: Vec<((u32, u32), u32, bool)> = links_between
-        .into_iter()
-        .map(|((a, b), n)| {
-            let joined = judge_connection(
-                &patches[a as usize],
-                &patches[b as usize],
-                params.concave_tolerance_deg,
-            );
-            ((a, b), n, joined)
-        })
-        .collect();
-    connections.sort_unstable();
-    let mut piece_of = join_patches(patch_weights, &connections, params.min_piece_weight);
-    join_dished(
-        centroids,
-        cluster,
-        &patch_of,
-        &links,
-        &mut piece_of,
-        params.viewpoint,
-    );
+    let piece_of = if patches.iter().all(|patch| patch.normal == Vec3::ZERO) {
+        // No patch has a normal to judge by (each has fewer than three cells, as far away,
+        // where cells are as large as patches): every connection is judged joined, so the
+        // pieces are the components of the links between patches (see `join_patches`), and
+        // no two pieces touch for `join_dished` to join.
+        components(patch_count, patch_links(&patch_of, &links))
+    } else {
+        // Adjacent patches, how many cell links join them, and the judgement of each
+        // connection, in the order of the patches.
+        let mut adjacent: Vec<(u32, u32)> = patch_links(&patch_of, &links).collect();
+        adjacent.sort_unstable();
+        let connections: Vec<((u32, u32), u32, bool)> = adjacent
+            .chunk_by(|x, y| x == y)
+            .map(|run| {
+                let (a, b) = run[0];
+                let joined = judge_connection(
+                    &patches[a as usize],
+                    &patches[b as usize],
+                    params.concave_tolerance_deg,
+                );
+                ((a, b), run.len() as u32, joined)
+            })
+            .collect();
+        let mut piece_of = join_patches(patch_weights, &connections, params.min_piece_weight);
+        join_dished(
+            centroids,
+            cluster,
+            &patch_of,
+            &links,
+            &mut piece_of,
+            params.viewpoint,
+        );
+        piece_of
+    };
 
     let mut pieces: FxHashMap<u32, Vec<u32>> = FxHashMap::default();
     for (k, &p) in patch_of.iter().enumerate() {
@@ -618,14 +716,16 @@ mod tests {
                 .iter()
                 .map(|plane| plane.normal)
                 .collect();
+        let reach = crate::range::RangeDistance::new(0.012, 0.0, 1.0, params().viewpoint);
+        let links = CellLinks::new(points, &all, &reach);
         split_at_concave_creases(
             points,
             &[],
             &normals,
             &all,
+            (&links, &all),
             &params(),
             |_| 0.008,
-            |_, _| 0.012,
         )
     }
 
@@ -719,6 +819,20 @@ mod tests {
             normal: Vec3::new(-(10f32.to_radians().sin()), 0.0, 10f32.to_radians().cos()),
         };
         assert!(judge_connection(&up, &tilted, 20.0));
+    }
+
+    #[test]
+    fn pieces_that_all_agree_are_the_components_of_their_connections() {
+        // Patches 0–2 and 3–4 joined along two chains, 5 alone: three pieces, however small
+        // (no piece touches another to join it).
+        let connections = [((0, 1), 3, true), ((1, 2), 1, true), ((3, 4), 2, true)];
+        let pieces = join_patches(vec![10; 6], &connections, 1000);
+        assert!(pieces[..3].iter().all(|&p| p == pieces[0]));
+        assert_eq!(pieces[3], pieces[4]);
+        let mut distinct = vec![pieces[0], pieces[3], pieces[5]];
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), 3, "{pieces:?}");
     }
 
     #[test]

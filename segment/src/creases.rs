@@ -29,6 +29,9 @@ pub(crate) struct LocalPlane {
 /// The local plane of each of `indices` (ascending, finite points), from its neighbours among
 /// `indices` within `radius_m`, with the normal turned towards `viewpoint`; a zero normal and
 /// depth where the neighbours do not determine a plane. In the order of `indices`.
+///
+/// The neighbours are searched cell by cell of a grid of the radius: the points of a cell share
+/// the 27 cells around it, gathered once (positions side by side) for all of them.
 pub(crate) fn local_planes(
     points: &[Vec3],
     indices: &[u32],
@@ -36,40 +39,79 @@ pub(crate) fn local_planes(
     viewpoint: Vec3,
 ) -> Vec<LocalPlane> {
     let grid = VoxelGrid::new(points, indices, radius_m);
+    let neighbourhoods = grid.neighbourhoods();
     let radius_sq = radius_m * radius_m;
-    indices
-        .par_iter()
-        .map_init(Vec::new, |near: &mut Vec<u32>, &i| {
-            let p = points[i as usize];
-            near.clear();
-            grid.for_each_near(p, |j| {
-                if p.distance_squared(points[j as usize]) <= radius_sq {
-                    near.push(j);
+    let per_cell: Vec<Vec<(u32, LocalPlane)>> = (0..grid.cell_count())
+        .into_par_iter()
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(around, near): &mut (Vec<Vec3>, Vec<u32>), c| {
+                around.clear();
+                for &id in neighbourhoods.of(c) {
+                    let members = grid.cell(id as usize).0;
+                    around.extend(members.iter().map(|&j| points[j as usize]));
                 }
-            });
-            // A plane through a few hundred neighbours is as good as through thousands (a
-            // Kinect sees ~1500 points in a 2.5 cm ball at 0.7 m): fit to an even stride.
-            let stride = near.len().div_ceil(MAX_FIT_POINTS).max(1);
-            if stride > 1 {
-                let kept: Vec<u32> = near.iter().step_by(stride).copied().collect();
-                *near = kept;
-            }
-            // The valley depth is `(centroid − p)·n` with `n · centroid = d`, `n` towards the
-            // viewpoint.
-            match fit_plane(points, near) {
-                Some((n, d)) if n.dot(viewpoint - p) < 0.0 => LocalPlane {
-                    normal: -n,
-                    valley_depth_m: n.dot(p) - d,
-                },
-                Some((n, d)) => LocalPlane {
-                    normal: n,
-                    valley_depth_m: d - n.dot(p),
-                },
-                None => LocalPlane {
-                    normal: Vec3::ZERO,
-                    valley_depth_m: 0.0,
-                },
-            }
-        })
-        .collect()
+                let (members, slots) = grid.cell(c);
+                members
+                    .iter()
+                    .zip(slots)
+                    .map(|(&i, &slot)| {
+                        let p = points[i as usize];
+                        // `near` indexes `around`, in the order of a search around `p`.
+                        // Without a branch: about a third of the candidates are in the
+                        // ball, in no order a branch predictor could learn.
+                        near.resize(around.len(), 0);
+                        let mut kept = 0;
+                        for (k, &q) in around.iter().enumerate() {
+                            near[kept] = k as u32;
+                            kept += usize::from(p.distance_squared(q) <= radius_sq);
+                        }
+                        near.truncate(kept);
+                        (slot, local_plane(around, near, p, viewpoint))
+                    })
+                    .collect()
+            },
+        )
+        .collect();
+    let mut planes = vec![
+        LocalPlane {
+            normal: Vec3::ZERO,
+            valley_depth_m: 0.0,
+        };
+        indices.len()
+    ];
+    for (slot, plane) in per_cell.into_iter().flatten() {
+        planes[slot as usize] = plane;
+    }
+    planes
+}
+
+/// The local plane at `p` through `near` (indices into `around`, its neighbours).
+fn local_plane(around: &[Vec3], near: &mut Vec<u32>, p: Vec3, viewpoint: Vec3) -> LocalPlane {
+    // A plane through a few hundred neighbours is as good as through thousands (a Kinect sees
+    // ~1500 points in a 2.5 cm ball at 0.7 m): fit to an even stride.
+    let stride = near.len().div_ceil(MAX_FIT_POINTS).max(1);
+    if stride > 1 {
+        let mut k = 0;
+        near.retain(|_| {
+            k += 1;
+            (k - 1) % stride == 0
+        });
+    }
+    // The valley depth is `(centroid − p)·n` with `n · centroid = d`, `n` towards the
+    // viewpoint.
+    match fit_plane(around, near) {
+        Some((n, d)) if n.dot(viewpoint - p) < 0.0 => LocalPlane {
+            normal: -n,
+            valley_depth_m: n.dot(p) - d,
+        },
+        Some((n, d)) => LocalPlane {
+            normal: n,
+            valley_depth_m: d - n.dot(p),
+        },
+        None => LocalPlane {
+            normal: Vec3::ZERO,
+            valley_depth_m: 0.0,
+        },
+    }
 }

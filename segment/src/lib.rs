@@ -10,7 +10,8 @@
 //!   [`StageTimes`].
 //! - [`segment_cloud`]: [`segment`] for a [`PointCloud`].
 //! - [`segment_organised`]: an organised cloud (a depth image) segmented on every 2nd or
-//!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path.
+//!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path
+//!   ([`segment_organised_timed`] with the stage times).
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
 //!   --objects`'.
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
@@ -29,8 +30,9 @@
 //!    cell centroids, on which stages 4 and 5 run; each point then takes its cell's object.
 //! 4. `creases.rs`: each remaining point's depth below its local plane (PCA); points in concave
 //!    creases, where one object stands on or leans against another, are set aside.
-//! 5. `clusters.rs`: Euclidean clustering of the rest on a voxel hash grid, clusters outside a
-//!    size range dropped; then each set-aside point joins the object of its nearest neighbour.
+//! 5. `clusters.rs`: Euclidean clustering of the rest, linked on voxel hash grids
+//!    (`links.rs`; on cells the links are kept for stage 7), clusters outside a size range
+//!    dropped; then each set-aside point joins the object of its nearest neighbour.
 //! 6. `scene.rs`: clusters that are background (walls, furniture, slices of far depth,
 //!    strips of floor) dropped.
 //! 7. `convexity.rs`, on the cells (stage 3 on): each cluster split where its surface folds
@@ -40,6 +42,7 @@ mod clusters;
 mod convexity;
 mod creases;
 pub mod grid;
+mod links;
 mod organised;
 mod planes;
 mod range;
@@ -52,7 +55,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tacmesh_source::PointCloud;
 
-pub use organised::{segment_organised, OrganisedSegmentation};
+pub use organised::{segment_organised, segment_organised_timed, OrganisedSegmentation};
 pub use planes::SupportPlane;
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
@@ -273,12 +276,21 @@ pub struct StageTimes {
     pub clusters: Duration,
     /// Clusters split at their concave creases (zero if off).
     pub convexity: Duration,
+    /// Picking the strided pixels of an organised cloud and labelling every pixel from its
+    /// strided neighbour ([`segment_organised_timed`]; zero otherwise).
+    pub organised: Duration,
 }
 
 impl StageTimes {
     /// The sum of the stages.
     pub fn total(&self) -> Duration {
-        self.planes + self.classify + self.voxels + self.creases + self.clusters + self.convexity
+        self.planes
+            + self.classify
+            + self.voxels
+            + self.creases
+            + self.clusters
+            + self.convexity
+            + self.organised
     }
 }
 
@@ -361,84 +373,89 @@ pub fn segment_timed(
     let background_of = |object: &[u32]| {
         scene::background_cluster(points, object, &planes, &background, &band, config)
     };
-    let (objects, background_clusters) =
-        if config.voxel_size_m > 0.0 && config.voxel_size_m.is_finite() {
-            // Creases and clusters on the cells' centroids; each point takes its cell's object.
-            let clock = Instant::now();
-            let coarsen = cluster_reach(config);
-            let cells = voxels::voxel_cells(points, &candidates, config.voxel_size_m, &coarsen);
-            let all_cells: Vec<u32> = (0..cells.counts.len() as u32).collect();
-            times.voxels = clock.elapsed();
-            let params = convexity_params(config);
-            let (cell_objects, normals) = find_objects(
-                &cells.centroids,
-                &all_cells,
-                &cells.counts,
-                config,
-                params.enabled(),
-                &mut times,
-            );
-            let clock = Instant::now();
-            let points_of_cell = voxels::points_of_cells(&cells, &candidates);
-            let to_points = |cell_list: &[u32]| -> Vec<u32> {
-                let mut object: Vec<u32> = cell_list
-                    .iter()
-                    .flat_map(|&c| points_of_cell.of(c))
-                    .copied()
-                    .collect();
-                object.sort_unstable();
-                object
-            };
-            let mut objects = Vec::with_capacity(cell_objects.len());
-            let mut dropped = 0;
-            for cell_list in &cell_objects {
-                if background_of(&to_points(cell_list)).is_some() {
-                    dropped += 1;
-                    continue;
-                }
-                objects.push(cell_list);
+    let (objects, background_clusters) = if config.voxel_size_m > 0.0
+        && config.voxel_size_m.is_finite()
+    {
+        // Creases and clusters on the cells' centroids; each point takes its cell's object.
+        let clock = Instant::now();
+        let coarsen = cluster_reach(config);
+        let cells = voxels::voxel_cells(points, &candidates, config.voxel_size_m, &coarsen);
+        let all_cells: Vec<u32> = (0..cells.counts.len() as u32).collect();
+        times.voxels = clock.elapsed();
+        let params = convexity_params(config);
+        // The clustering's links, for clustering, creases joining their objects and the
+        // convexity split.
+        let clock = Instant::now();
+        let links = links::Links::new(&cells.centroids, &all_cells, &coarsen);
+        times.clusters = clock.elapsed();
+        let (cell_objects, normals) = find_objects(
+            &cells.centroids,
+            &all_cells,
+            &cells.counts,
+            config,
+            params.enabled(),
+            Some(&links),
+            &mut times,
+        );
+        let clock = Instant::now();
+        let to_points =
+            |cell_lists: &[Vec<u32>]| voxels::points_of_cell_lists(&cells, &candidates, cell_lists);
+        let mut objects = Vec::with_capacity(cell_objects.len());
+        let mut dropped = 0;
+        for (cell_list, object) in cell_objects.iter().zip(to_points(&cell_objects)) {
+            if background_of(&object).is_some() {
+                dropped += 1;
+                continue;
             }
-            times.clusters += clock.elapsed();
-            // Touching objects: each cluster split where its surface folds concavely.
-            let clock = Instant::now();
-            let cell_m = |p: Vec3| config.voxel_size_m * (1u32 << coarsen.band(p)) as f32;
-            let link_m = |p: Vec3, q: Vec3| coarsen.at(p).max(coarsen.at(q));
-            let pieces: Vec<Vec<u32>> = objects
-                .par_iter()
-                .flat_map_iter(|cell_list| {
-                    convexity::split_at_concave_creases(
-                        &cells.centroids,
-                        &cells.counts,
-                        &normals,
-                        cell_list,
-                        &params,
-                        cell_m,
-                        link_m,
-                    )
-                })
-                .filter(|piece| {
-                    piece
-                        .iter()
-                        .map(|&c| cells.counts[c as usize] as usize)
-                        .sum::<usize>()
-                        >= config.min_cluster_points.max(1)
-                })
-                .map(|piece| to_points(&piece))
-                .collect();
-            times.convexity = clock.elapsed();
-            (pieces, dropped)
-        } else {
-            let (objects, _) = find_objects(points, &candidates, &[], config, false, &mut times);
-            let clock = Instant::now();
-            let before = objects.len();
-            let objects: Vec<Vec<u32>> = objects
-                .into_iter()
-                .filter(|object| background_of(object).is_none())
-                .collect();
-            times.clusters += clock.elapsed();
-            let dropped = before - objects.len();
-            (objects, dropped)
-        };
+            objects.push(cell_list);
+        }
+        times.clusters += clock.elapsed();
+        // Touching objects: each cluster split where its surface folds concavely.
+        let clock = Instant::now();
+        let cell_m = |p: Vec3| config.voxel_size_m * (1u32 << coarsen.band(p)) as f32;
+        // Each cell's position in its object, for the split to find its links there.
+        let mut position = vec![u32::MAX; cells.counts.len()];
+        for cell_list in &objects {
+            for (k, &c) in cell_list.iter().enumerate() {
+                position[c as usize] = k as u32;
+            }
+        }
+        let pieces: Vec<Vec<u32>> = objects
+            .par_iter()
+            .flat_map_iter(|cell_list| {
+                convexity::split_at_concave_creases(
+                    &cells.centroids,
+                    &cells.counts,
+                    &normals,
+                    cell_list,
+                    (&links, &position),
+                    &params,
+                    cell_m,
+                )
+            })
+            .filter(|piece| {
+                piece
+                    .iter()
+                    .map(|&c| cells.counts[c as usize] as usize)
+                    .sum::<usize>()
+                    >= config.min_cluster_points.max(1)
+            })
+            .collect();
+        let pieces = to_points(&pieces);
+        times.convexity = clock.elapsed();
+        (pieces, dropped)
+    } else {
+        let (objects, _) = find_objects(points, &candidates, &[], config, false, None, &mut times);
+        let clock = Instant::now();
+        let before = objects.len();
+        let objects: Vec<Vec<u32>> = objects
+            .into_iter()
+            .filter(|object| background_of(object).is_none())
+            .collect();
+        times.clusters += clock.elapsed();
+        let dropped = before - objects.len();
+        (objects, dropped)
+    };
 
     let clock = Instant::now();
     let mut objects = objects;
@@ -550,12 +567,8 @@ fn classify(
         }
         candidates.push(i);
     }
-    for ((plane, mut inliers), fringe) in planes.iter_mut().zip(inliers).zip(fringes) {
-        if !fringe.is_empty() {
-            inliers.extend(fringe);
-            inliers.sort_unstable();
-        }
-        plane.inliers = inliers;
+    for ((plane, inliers), fringe) in planes.iter_mut().zip(inliers).zip(fringes) {
+        plane.inliers = merge_ascending(&inliers, &fringe);
     }
     for (plane, dropped) in background.iter_mut().zip(dropped) {
         plane.inliers = dropped;
@@ -563,17 +576,40 @@ fn classify(
     candidates
 }
 
+/// The union of two disjoint ascending lists, ascending.
+fn merge_ascending(a: &[u32], b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        if a[i] < b[j] {
+            out.push(a[i]);
+            i += 1;
+        } else {
+            out.push(b[j]);
+            j += 1;
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+    out
+}
+
 /// Stages 4 and 5 on `indices` into `points` (each standing for `weights[i]` input points, or
 /// one if `weights` is empty): the crease test, Euclidean clustering of the points outside
 /// creases, then crease points joining their nearest object. Returns the objects (in no
 /// particular order) and, if the crease test ran or `need_normals` asks for them, each
 /// point's local normal (in the order of `indices`; zero where undetermined).
+///
+/// `links`, if given, are the clustering's links of every point (`indices` must then be every
+/// point, in order): voxel cells, whose links the convexity split walks again, find them
+/// once; points, whose links are too many to keep, are searched on voxel grids as needed.
 fn find_objects(
     points: &[Vec3],
     indices: &[u32],
     weights: &[u32],
     config: &SegmentConfig,
     need_normals: bool,
+    links: Option<&links::Links>,
     times: &mut StageTimes,
 ) -> (Vec<Vec<u32>>, Vec<Vec3>) {
     // Concave creases: points deeper than `max_valley_depth_m` below their local plane do not
@@ -600,20 +636,35 @@ fn find_objects(
     times.creases = clock.elapsed();
 
     let clock = Instant::now();
-    let mut objects = clusters::euclidean_clusters(
-        points,
-        &core,
-        weights,
-        &cluster_reach(config),
-        config.min_cluster_points.max(1),
-        config.max_cluster_points,
-    );
+    let reach = cluster_reach(config);
+    let (min_points, max_points) = (config.min_cluster_points.max(1), config.max_cluster_points);
+    let mut objects = match links {
+        _ if !clusters::links_at_all(&reach) => Vec::new(),
+        Some(links) => {
+            clusters::clusters_of_links(points.len(), &core, links, weights, min_points, max_points)
+        }
+        None => {
+            clusters::euclidean_clusters(points, &core, weights, &reach, min_points, max_points)
+        }
+    };
     // Creases fill in from their edges: each pass attaches the points next to an object.
-    while !valley.is_empty() {
-        let before = valley.len();
-        valley = attach_to_nearest(points, &mut objects, &valley, config.cluster_tolerance_m);
-        if valley.len() == before {
-            break;
+    let tolerance_m = config.cluster_tolerance_m;
+    if !(objects.is_empty() || valley.is_empty() || tolerance_m <= 0.0 || !tolerance_m.is_finite())
+    {
+        match links {
+            // Points within the tolerance of each other are linked (the reach is at least
+            // the tolerance).
+            Some(links) => {
+                attach_to_nearest(points, &mut objects, valley, tolerance_m, |i, visit| {
+                    links.of(i as usize).iter().for_each(|&j| visit(j))
+                })
+            }
+            None => {
+                let grid = grid::VoxelGrid::new(points, indices, tolerance_m);
+                attach_to_nearest(points, &mut objects, valley, tolerance_m, |i, visit| {
+                    grid.for_each_near(points[i as usize], visit)
+                })
+            }
         }
     }
     times.clusters += clock.elapsed();
@@ -621,55 +672,61 @@ fn find_objects(
     (objects, normals)
 }
 
-/// Adds each of `loose` to the object of its nearest object point within `tolerance_m`,
-/// keeping each object's indices ascending, and returns the points left loose.
+/// Adds each of `loose` to the object of its nearest object point within `tolerance_m`, in
+/// passes (creases fill in from their edges: each pass attaches the points next to an
+/// object), until a pass attaches none; each object's indices stay ascending.
+/// `near(i, visit)` visits a superset of the points within `tolerance_m` of point `i`.
 fn attach_to_nearest(
     points: &[Vec3],
     objects: &mut [Vec<u32>],
-    loose: &[u32],
+    mut loose: Vec<u32>,
     tolerance_m: f32,
-) -> Vec<u32> {
-    if objects.is_empty() || loose.is_empty() || tolerance_m <= 0.0 || !tolerance_m.is_finite() {
-        return loose.to_vec();
-    }
-    let members: Vec<u32> = {
-        let mut all: Vec<u32> = objects.iter().flatten().copied().collect();
-        all.sort_unstable();
-        all
-    };
-    let mut object_of = rustc_hash::FxHashMap::default();
+    near: impl Fn(u32, &mut dyn FnMut(u32)) + Sync,
+) {
+    let mut object_of = vec![u32::MAX; points.len()];
     for (k, object) in objects.iter().enumerate() {
         for &i in object {
-            object_of.insert(i, k);
+            object_of[i as usize] = k as u32;
         }
     }
-    let grid = grid::VoxelGrid::new(points, &members, tolerance_m);
     let tolerance_sq = tolerance_m * tolerance_m;
-    let owners: Vec<Option<usize>> = loose
-        .par_iter()
-        .map(|&i| {
-            let p = points[i as usize];
-            let mut best: Option<(f32, u32)> = None;
-            grid.for_each_near(p, |j| {
-                let d = p.distance_squared(points[j as usize]);
-                if d <= tolerance_sq && best.is_none_or(|(bd, bj)| (d, j) < (bd, bj)) {
-                    best = Some((d, j));
-                }
-            });
-            best.map(|(_, j)| object_of[&j])
-        })
-        .collect();
-    let mut still_loose = Vec::new();
-    for (&i, owner) in loose.iter().zip(owners) {
-        match owner {
-            Some(k) => objects[k].push(i),
-            None => still_loose.push(i),
+    loop {
+        // Each pass judges every loose point against the objects as they were before it.
+        let owners: Vec<u32> = loose
+            .par_iter()
+            .map(|&i| {
+                let p = points[i as usize];
+                let mut best: Option<(f32, u32)> = None;
+                near(i, &mut |j| {
+                    if object_of[j as usize] == u32::MAX {
+                        return;
+                    }
+                    let d = p.distance_squared(points[j as usize]);
+                    if d <= tolerance_sq && best.is_none_or(|(bd, bj)| (d, j) < (bd, bj)) {
+                        best = Some((d, j));
+                    }
+                });
+                best.map_or(u32::MAX, |(_, j)| object_of[j as usize])
+            })
+            .collect();
+        let before = loose.len();
+        let mut still_loose = Vec::new();
+        for (&i, owner) in loose.iter().zip(owners) {
+            if owner == u32::MAX {
+                still_loose.push(i);
+            } else {
+                objects[owner as usize].push(i);
+                object_of[i as usize] = owner;
+            }
+        }
+        loose = still_loose;
+        if loose.is_empty() || loose.len() == before {
+            break;
         }
     }
     for object in objects.iter_mut() {
         object.sort_unstable();
     }
-    still_loose
 }
 
 /// [`segment`] on the points of a [`PointCloud`] (normals are not used).

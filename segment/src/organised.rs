@@ -7,11 +7,14 @@
 //! labelled mOSD scans 0.89 against 0.93 at full resolution, `tests/real_data.rs`), and the
 //! full-resolution object points go on to tracking and fusion.
 //!
-//! Entry point: [`segment_organised`].
+//! Entry points: [`segment_organised`], and [`segment_organised_timed`], which also returns
+//! the stage times.
+
+use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::{segment_with_hints, SegmentConfig, Segmentation, SupportPlane};
+use crate::{segment_timed, SegmentConfig, Segmentation, StageTimes, SupportPlane};
 
 /// A full-resolution point joins the object of its strided neighbour only within this
 /// distance, in metres, so pixels across a depth edge do not.
@@ -31,12 +34,13 @@ pub struct OrganisedSegmentation {
 /// Segments every `stride`-th pixel (in each direction) of the organised cloud `points`
 /// (`width × height`, row-major) with `config`, whose cluster sizes count full-resolution
 /// points (they are divided by `stride²` for the strided cloud), starting from the plane
-/// `hints` as [`segment_with_hints`] does. Then each remaining point joins the object of its
-/// strided neighbour (the top-left pixel of its `stride × stride` block) when the two are
-/// within `LABEL_SPREAD_M` and the point is on no support or background plane.
+/// `hints` as [`segment_with_hints`](crate::segment_with_hints) does. Then each remaining
+/// point joins the object of its strided neighbour (the top-left pixel of its `stride ×
+/// stride` block) when the two are within `LABEL_SPREAD_M` and the point is on no support or
+/// background plane.
 ///
-/// Stride 1 is [`segment_with_hints`] itself. Never panics: a cloud shorter than
-/// `width × height` is segmented on the pixels it has.
+/// Stride 1 is [`segment_with_hints`](crate::segment_with_hints) itself. Never panics: a
+/// cloud shorter than `width × height` is segmented on the pixels it has.
 pub fn segment_organised(
     points: &[Vec3],
     width: u32,
@@ -45,6 +49,20 @@ pub fn segment_organised(
     config: &SegmentConfig,
     hints: &[SupportPlane],
 ) -> OrganisedSegmentation {
+    segment_organised_timed(points, width, height, stride, config, hints).0
+}
+
+/// [`segment_organised`], also returning how long each stage took; picking the strided pixels
+/// and labelling every pixel from its strided neighbour is [`StageTimes::organised`].
+pub fn segment_organised_timed(
+    points: &[Vec3],
+    width: u32,
+    height: u32,
+    stride: u32,
+    config: &SegmentConfig,
+    hints: &[SupportPlane],
+) -> (OrganisedSegmentation, StageTimes) {
+    let clock = Instant::now();
     let stride = stride.max(1) as usize;
     let width = width as usize;
     let height = (height as usize).min(points.len() / width.max(1));
@@ -62,48 +80,58 @@ pub fn segment_organised(
     } else {
         config.clone()
     };
-    let sub: Vec<Vec3> = (0..height)
-        .step_by(stride)
-        .flat_map(|v| {
-            (0..width)
-                .step_by(stride)
-                .map(move |u| points[v * width + u])
-        })
-        .collect();
-    let strided = segment_with_hints(&sub, &config, hints);
+    let mut sub: Vec<Vec3> = Vec::with_capacity(height.div_ceil(stride) * sub_width);
+    if width > 0 {
+        for row in points[..height * width].chunks_exact(width).step_by(stride) {
+            sub.extend(row.iter().step_by(stride));
+        }
+    }
+    let gathered = clock.elapsed();
+    let (strided, mut times) = segment_timed(&sub, &config, hints);
+    times.organised = gathered;
     if stride == 1 {
         let objects = strided.objects.clone();
-        return OrganisedSegmentation { strided, objects };
+        return (OrganisedSegmentation { strided, objects }, times);
     }
 
+    let clock = Instant::now();
+    let band = crate::plane_band(&config);
     let mut objects = vec![Vec::new(); strided.objects.len()];
     for v in 0..height {
-        for u in 0..width {
-            let i = v * width + u;
-            let p = points[i];
-            if !p.is_finite() {
+        // The strided pixels of this row's blocks; the pixels of an unlabelled block are not
+        // looked at.
+        let blocks = (v / stride) * sub_width..(v / stride + 1) * sub_width;
+        for (block, (&label, &anchor)) in strided.labels[blocks.clone()]
+            .iter()
+            .zip(&sub[blocks])
+            .enumerate()
+        {
+            if label == 0 {
                 continue;
             }
-            let j = (v / stride) * sub_width + u / stride;
-            let label = strided.labels[j] as usize;
-            if label == 0 || p.distance(sub[j]) > LABEL_SPREAD_M {
-                continue;
-            }
-            let band_m = config.plane_distance_at(p);
-            let on_plane = strided
-                .planes
-                .iter()
-                .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
-                || strided
-                    .background
+            for u in block * stride..((block + 1) * stride).min(width) {
+                let i = v * width + u;
+                let p = points[i];
+                if !p.is_finite() || p.distance(anchor) > LABEL_SPREAD_M {
+                    continue;
+                }
+                let band_m = band.at(p);
+                let on_plane = strided
+                    .planes
                     .iter()
-                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
-            if !on_plane {
-                objects[label - 1].push(i as u32);
+                    .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
+                    || strided
+                        .background
+                        .iter()
+                        .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
+                if !on_plane {
+                    objects[label as usize - 1].push(i as u32);
+                }
             }
         }
     }
-    OrganisedSegmentation { strided, objects }
+    times.organised += clock.elapsed();
+    (OrganisedSegmentation { strided, objects }, times)
 }
 
 #[cfg(test)]
@@ -172,6 +200,15 @@ mod tests {
         let plain = crate::segment(&points, &config);
         assert_eq!(organised.strided, plain);
         assert_eq!(organised.objects, plain.objects);
+    }
+
+    #[test]
+    fn an_empty_image_is_no_objects() {
+        let (points, _, _) = table_with_cube();
+        for (width, height) in [(0, 90), (120, 0), (0, 0)] {
+            let organised = segment_organised(&points, width, height, 2, &looking_down(), &[]);
+            assert!(organised.objects.is_empty(), "{width}×{height}");
+        }
     }
 
     #[test]

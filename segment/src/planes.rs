@@ -22,6 +22,7 @@ use glam::{DMat3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use tacmesh_reconstruct::moments::smallest_eigenvector;
 
+use crate::grid::floor_i32;
 use crate::range::RangeDistance;
 
 /// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
@@ -89,18 +90,29 @@ const AREA_CELL_M: f32 = 0.04;
 /// diagonals.
 fn extent_and_area(points: &[Vec3], inliers: &[u32], n: Vec3) -> (f32, f32) {
     let (u, v) = plane_basis(n);
-    let mut squares: Vec<(i32, i32)> = inliers
+    // Sorted as one integer each (the order of the pairs), which compares in one step.
+    let mut keys: Vec<u64> = inliers
         .iter()
         .map(|&i| {
             let p = points[i as usize];
+            let (a, b) = (
+                floor_i32(u.dot(p) / AREA_CELL_M),
+                floor_i32(v.dot(p) / AREA_CELL_M),
+            );
+            (u64::from(a as u32 ^ SIGN) << 32) | u64::from(b as u32 ^ SIGN)
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let squares: Vec<(i32, i32)> = keys
+        .into_iter()
+        .map(|key| {
             (
-                (u.dot(p) / AREA_CELL_M).floor() as i32,
-                (v.dot(p) / AREA_CELL_M).floor() as i32,
+                ((key >> 32) as u32 ^ SIGN) as i32,
+                (key as u32 ^ SIGN) as i32,
             )
         })
         .collect();
-    squares.sort_unstable();
-    squares.dedup();
     let mut seen = vec![false; squares.len()];
     let mut best: Vec<(i32, i32)> = Vec::new();
     for start in 0..squares.len() {
@@ -218,17 +230,19 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
         sum += points[i as usize].as_dvec3() - origin;
     }
     let mean = sum / indices.len() as f64;
-    let mut c = [[0.0f64; 3]; 3];
+    // The six distinct entries of the symmetric covariance.
+    let (mut xx, mut xy, mut xz, mut yy, mut yz, mut zz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for &i in indices {
         let r = points[i as usize].as_dvec3() - origin - mean;
-        let r = r.to_array();
-        for (j, row) in c.iter_mut().enumerate() {
-            for (k, cell) in row.iter_mut().enumerate() {
-                *cell += r[j] * r[k];
-            }
-        }
+        xx += r.x * r.x;
+        xy += r.x * r.y;
+        xz += r.x * r.z;
+        yy += r.y * r.y;
+        yz += r.y * r.z;
+        zz += r.z * r.z;
     }
-    let n = smallest_eigenvector(DMat3::from_cols_array_2d(&c)).normalize_or_zero();
+    let c = DMat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz]);
+    let n = smallest_eigenvector(c).normalize_or_zero();
     if n == DVec3::ZERO {
         return None;
     }
@@ -236,20 +250,17 @@ pub(crate) fn fit_plane(points: &[Vec3], indices: &[u32]) -> Option<(Vec3, f32)>
     Some((n.as_vec3(), n.dot(centroid) as f32))
 }
 
-/// Candidates within the inlier distance (at their range) of the plane.
+/// Candidates within their inlier distance (`band_m[i]` for point `i`) of the plane.
 fn inliers_of(
     points: &[Vec3],
     candidates: &[u32],
     (n, d): (Vec3, f32),
-    band: &RangeDistance,
+    band_m: &[f32],
 ) -> Vec<u32> {
     candidates
         .par_iter()
         .copied()
-        .filter(|&i| {
-            let p = points[i as usize];
-            (n.dot(p) - d).abs() <= band.at(p)
-        })
+        .filter(|&i| (n.dot(points[i as usize]) - d).abs() <= band_m[i as usize])
         .collect()
 }
 
@@ -258,9 +269,9 @@ fn refine(
     points: &[Vec3],
     candidates: &[u32],
     mut plane: (Vec3, f32),
-    band: &RangeDistance,
+    band_m: &[f32],
 ) -> ((Vec3, f32), Vec<u32>) {
-    let mut inliers = inliers_of(points, candidates, plane, band);
+    let mut inliers = inliers_of(points, candidates, plane, band_m);
     for _ in 0..3 {
         let Some(fitted) = fit_plane(points, &inliers) else {
             break;
@@ -268,7 +279,7 @@ fn refine(
         // Always take the fit, even if it holds a few points fewer: a hypothesis tilted within
         // the threshold can hold more (the feet of objects) and still be the worse plane.
         plane = fitted;
-        inliers = inliers_of(points, candidates, fitted, band);
+        inliers = inliers_of(points, candidates, fitted, band_m);
     }
     (plane, inliers)
 }
@@ -311,6 +322,29 @@ fn simplify_hull(hull: &mut Vec<Vec2>, tolerance_m: f32) {
     }
 }
 
+/// Flipping the sign bit orders `i32`s as `u32`s.
+const SIGN: u32 = 1 << 31;
+
+/// The bits of `x`, turned so that their order as integers is `f32::total_cmp`'s: a positive
+/// float's sign bit set, a negative float's bits all flipped.
+fn ordered_bits(x: f32) -> u32 {
+    let bits = x.to_bits();
+    if bits & SIGN == 0 {
+        bits | SIGN
+    } else {
+        !bits
+    }
+}
+
+/// The float of [`ordered_bits`].
+fn from_ordered_bits(bits: u32) -> f32 {
+    f32::from_bits(if bits & SIGN != 0 {
+        bits & !SIGN
+    } else {
+        !bits
+    })
+}
+
 /// Convex hull of the inliers projected onto the plane, by Andrew's monotone chain (Andrew,
 /// "Another efficient algorithm for convex hulls in two dimensions", IPL 1979), lifted back to
 /// 3-D, with corners flatter than [`OUTLINE_TOLERANCE_M`] dropped. Counter-clockwise about `n`.
@@ -323,7 +357,19 @@ fn outline_on_plane(points: &[Vec3], inliers: &[u32], n: Vec3, d: f32) -> Vec<Ve
             Vec2::new(u.dot(p), v.dot(p))
         })
         .collect();
-    flat.sort_unstable_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    // By x, then y, in `total_cmp`'s order, as one integer each.
+    let mut keys: Vec<u64> = flat
+        .iter()
+        .map(|q| (u64::from(ordered_bits(q.x)) << 32) | u64::from(ordered_bits(q.y)))
+        .collect();
+    keys.sort_unstable();
+    flat.clear();
+    flat.extend(keys.into_iter().map(|key| {
+        Vec2::new(
+            from_ordered_bits((key >> 32) as u32),
+            from_ordered_bits(key as u32),
+        )
+    }));
     flat.dedup();
     if flat.len() < 3 {
         return Vec::new();
@@ -379,6 +425,11 @@ pub(crate) fn find_planes(
     hints: &[(Vec3, f32)],
 ) -> Vec<SupportPlane> {
     let viewpoint = band.viewpoint;
+    // Each candidate's inlier distance, which every refinement reads again.
+    let mut band_m = vec![0.0; points.len()];
+    for &i in candidates {
+        band_m[i as usize] = band.at(points[i as usize]);
+    }
     let mut rng = XorShift::new(seed);
     let mut remaining: Vec<u32> = candidates.to_vec();
     let mut planes = Vec::new();
@@ -388,7 +439,7 @@ pub(crate) fn find_planes(
     while planes.len() < max_planes && remaining.len() >= min_inliers {
         // A hint that still holds enough points after refinement saves the RANSAC search.
         let hinted = hints.by_ref().find_map(|&hint| {
-            let (plane, inliers) = refine(points, &remaining, hint, band);
+            let (plane, inliers) = refine(points, &remaining, hint, &band_m);
             (inliers.len() >= min_inliers).then_some((plane, inliers))
         });
         if let Some(((n, d), inliers)) = hinted {
@@ -408,10 +459,7 @@ pub(crate) fn find_planes(
         searches_left -= 1;
         // A fixed random scoring subset (with replacement; duplicates are harmless), each point
         // with its inlier distance.
-        let with_band = |i: u32| {
-            let p = points[i as usize];
-            (p, band.at(p))
-        };
+        let with_band = |i: u32| (points[i as usize], band_m[i as usize]);
         let sample: Vec<(Vec3, f32)> = if remaining.len() <= SCORE_SAMPLE {
             remaining.iter().map(|&i| with_band(i)).collect()
         } else {
@@ -434,7 +482,7 @@ pub(crate) fn find_planes(
             // Ties go to the earliest hypothesis so that the result is deterministic.
             .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
         let Some((_, k)) = best else { break };
-        let (plane, inliers) = refine(points, &remaining, hypotheses[k], band);
+        let (plane, inliers) = refine(points, &remaining, hypotheses[k], &band_m);
         if inliers.len() < min_inliers {
             break;
         }
@@ -496,6 +544,32 @@ fn difference(a: &[u32], b: &[u32]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ordered_bits_order_as_total_cmp_and_round_trip() {
+        let values = [
+            f32::NEG_INFINITY,
+            -3.5,
+            -f32::MIN_POSITIVE,
+            -0.0,
+            0.0,
+            1e-40,
+            0.25,
+            7.0,
+            f32::INFINITY,
+            f32::NAN,
+        ];
+        for a in values {
+            assert_eq!(from_ordered_bits(ordered_bits(a)).to_bits(), a.to_bits());
+            for b in values {
+                assert_eq!(
+                    ordered_bits(a).cmp(&ordered_bits(b)),
+                    a.total_cmp(&b),
+                    "{a} {b}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn fit_plane_recovers_a_tilted_plane() {

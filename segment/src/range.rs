@@ -44,6 +44,16 @@ impl RangeDistance {
             .max(self.per_m2 * p.distance_squared(self.viewpoint))
     }
 
+    /// The range from the viewpoint where band `band` (≥ 1) begins: nearer points are all in
+    /// lower bands (infinity for a fixed distance, which has only band 0).
+    pub(crate) fn band_start_m(&self, band: usize) -> f32 {
+        if self.per_m2 > 0.0 {
+            (2f32.powi(band as i32 - 1) * self.base_m / self.per_m2).sqrt()
+        } else {
+            f32::INFINITY
+        }
+    }
+
     /// The range band of `p`: 0 where the distance is the base one, `k` where it is more than
     /// `2^(k-1)` and at most `2^k` times it (at most [`MAX_BAND`]).
     pub(crate) fn band(&self, p: Vec3) -> usize {
@@ -65,6 +75,10 @@ mod tests {
         let d = RangeDistance::new(0.015, 0.0035, 1.5, Vec3::ZERO);
         assert_eq!(d.at(Vec3::new(0.0, 0.0, 1.0)), 0.015);
         let far = d.at(Vec3::new(0.0, 0.0, 3.5));
+        // Band 1 begins where the distance passes the base: 0.015 = 0.00525 r².
+        assert!((d.band_start_m(1) - (0.015f32 / 0.00525).sqrt()).abs() < 1e-6);
+        assert_eq!(d.band(Vec3::new(0.0, 0.0, 0.999 * d.band_start_m(2))), 1);
+        assert_eq!(d.band(Vec3::new(0.0, 0.0, 1.001 * d.band_start_m(2))), 2);
         assert!((far - 1.5 * 0.0035 * 12.25).abs() < 1e-6, "{far}");
         assert_eq!(
             RangeDistance::new(0.015, 0.0, 1.5, Vec3::ZERO).at(far * Vec3::Z),

@@ -10,6 +10,7 @@
 use glam::{DVec3, Vec3};
 use rustc_hash::FxHashMap;
 
+use crate::grid::floor_i32;
 use crate::range::RangeDistance;
 
 /// The occupied cells of a set of points.
@@ -43,9 +44,9 @@ pub(crate) fn voxel_cells(
         let p = points[i as usize];
         let band = coarsen.band(p);
         let side_m = cell_m * (1u32 << band) as f32;
-        let q = (p / side_m).floor();
+        let q = p / side_m;
         // Saturating casts: absurdly distant points only share cells.
-        let key = [q.x as i32, q.y as i32, q.z as i32, band as i32];
+        let key = [floor_i32(q.x), floor_i32(q.y), floor_i32(q.z), band as i32];
         let id = match last {
             Some((last_key, id)) if last_key == key => id,
             _ => {
@@ -54,7 +55,7 @@ pub(crate) fn voxel_cells(
                 if id == next {
                     sums.push(DVec3::ZERO);
                     counts.push(0);
-                    corners.push(q * side_m);
+                    corners.push(q.floor() * side_m);
                 }
                 last = Some((key, id));
                 id
@@ -77,35 +78,34 @@ pub(crate) fn voxel_cells(
     }
 }
 
-/// The points of each cell: `of(c)` lists the input indices in cell `c`, ascending.
-pub(crate) struct PointsOfCells {
-    start: Vec<u32>,
-    members: Vec<u32>,
-}
-
-impl PointsOfCells {
-    pub(crate) fn of(&self, cell: u32) -> &[u32] {
-        &self.members[self.start[cell as usize] as usize..self.start[cell as usize + 1] as usize]
-    }
-}
-
-/// Groups `indices` (the input of [`voxel_cells`], ascending) by their cell.
-pub(crate) fn points_of_cells(cells: &Cells, indices: &[u32]) -> PointsOfCells {
-    // Counting sort by cell keeps each cell's points ascending.
-    let mut start = vec![0u32; cells.counts.len() + 1];
-    for &c in &cells.cell_of {
-        start[c as usize + 1] += 1;
-    }
-    for k in 0..cells.counts.len() {
-        start[k + 1] += start[k];
-    }
-    let mut fill = start.clone();
-    let mut members = vec![0u32; indices.len()];
+/// The points of each list of cells in `lists` (disjoint lists of cells of `cells`), from the
+/// input of [`voxel_cells`] (`indices`, ascending): one pass over the points, which keeps each
+/// list of points ascending without a sort.
+pub(crate) fn points_of_cell_lists(
+    cells: &Cells,
+    indices: &[u32],
+    lists: &[Vec<u32>],
+) -> Vec<Vec<u32>> {
+    let mut list_of = vec![u32::MAX; cells.counts.len()];
+    let mut points: Vec<Vec<u32>> = lists
+        .iter()
+        .enumerate()
+        .map(|(k, list)| {
+            let mut size = 0;
+            for &c in list {
+                list_of[c as usize] = k as u32;
+                size += cells.counts[c as usize] as usize;
+            }
+            Vec::with_capacity(size)
+        })
+        .collect();
     for (&i, &c) in indices.iter().zip(&cells.cell_of) {
-        members[fill[c as usize] as usize] = i;
-        fill[c as usize] += 1;
+        let k = list_of[c as usize];
+        if k != u32::MAX {
+            points[k as usize].push(i);
+        }
     }
-    PointsOfCells { start, members }
+    points
 }
 
 #[cfg(test)]
@@ -127,5 +127,9 @@ mod tests {
         assert_eq!(cells.cell_of, vec![0, 1, 0, 1]);
         assert!(cells.centroids[0].distance(Vec3::splat(0.002)) < 1e-6);
         assert!(cells.centroids[1].distance(Vec3::new(0.015, 0.001, 0.001)) < 1e-6);
+        assert_eq!(
+            points_of_cell_lists(&cells, &[0, 1, 2, 4], &[vec![1], vec![0]]),
+            vec![vec![1, 4], vec![0, 2]]
+        );
     }
 }
