@@ -134,7 +134,7 @@ pub struct SegmentConfig {
     /// (plane membership stays per point). Zero (the default) works point by point.
     pub voxel_size_m: f32,
     /// Size of the surface patches whose convexity splits touching objects, in metres (see
-    /// the `convexity` module); far away it grows to three cells and eight depth steps
+    /// the `convexity` module); far away it grows to three cells and sixteen depth steps
     /// (`range_step_per_m2`) across, so that noise does not decide a patch's normal. Zero
     /// turns the split off; it also needs `voxel_size_m` > 0 (it works on the cells).
     /// Default 0.03: a patch is flat enough to have one normal on a 10 cm object, and large

@@ -116,14 +116,15 @@ pub fn segment_organised_timed(
                     continue;
                 }
                 let band_m = band.at(p);
-                let on_plane = strided
-                    .planes
+                // On a support: within its band, or its margin above it. Below a support is
+                // not on it: a chair under a table is an object (the lowest support's underside
+                // was never an object to begin with).
+                let on_plane = strided.planes.iter().any(|plane| {
+                    (-band_m..=band_m + config.plane_margin_m).contains(&plane.signed_distance_m(p))
+                }) || strided
+                    .background
                     .iter()
-                    .any(|plane| plane.signed_distance_m(p) <= band_m + config.plane_margin_m)
-                    || strided
-                        .background
-                        .iter()
-                        .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
+                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
                 if !on_plane {
                     objects[label as usize - 1].push(i as u32);
                 }
@@ -221,5 +222,40 @@ mod tests {
             .iter()
             .flatten()
             .all(|&i| (i as usize) < points.len()));
+    }
+
+    #[test]
+    fn an_object_below_a_raised_support_keeps_its_points() {
+        // A floor 1.5 m below the camera, a 0.6 m square table top 0.6 m above the floor on
+        // the left, and a 12 cm box on the floor on the right: the box is below the table's
+        // plane, beside the table, not on it.
+        let (width, height) = (240u32, 160u32);
+        let mut points = Vec::new();
+        for v in 0..height {
+            for u in 0..width {
+                let (x, y) = ((u as f32 - 120.0) * 0.006, (v as f32 - 80.0) * 0.006);
+                let noise = ((u * 7 + v * 13) % 5) as f32 * 0.0005 - 0.001;
+                let z = if (-0.7..-0.1).contains(&x) && (-0.3..0.3).contains(&y) {
+                    -0.9
+                } else if (0.3..0.42).contains(&x) && (-0.06..0.06).contains(&y) {
+                    -1.38
+                } else {
+                    -1.5
+                };
+                points.push(Vec3::new(x, y, z + noise));
+            }
+        }
+        let config = SegmentConfig {
+            range_step_per_m2: 0.0,
+            ..looking_down()
+        };
+        let organised = segment_organised(&points, width, height, 2, &config, &[]);
+        assert_eq!(organised.strided.planes.len(), 2, "the floor and the table");
+        assert_eq!(organised.objects.len(), 1);
+        let on_box = organised.objects[0]
+            .iter()
+            .filter(|&&i| (points[i as usize].z + 1.38).abs() < 0.01)
+            .count();
+        assert!(on_box > 300, "{on_box} of the box's ~400 pixels");
     }
 }
