@@ -342,7 +342,10 @@ impl Fusing {
             capture_time,
             viewpoint_m: viewpoint,
             clusters,
-            free_space: Some(FreeSpace::from_points(&points, world_from_sensor)),
+            free_space: Some(
+                FreeSpace::from_points(&points, world_from_sensor)
+                    .with_supports(supports.iter().map(|s| (s.normal, s.offset_m))),
+            ),
         });
         counters.record(Stage::Integrate, started.elapsed());
         Counters::add(&counters.frames_processed, 1);

@@ -18,6 +18,13 @@
 //! seen through only if even the nearest surface measured in its direction is behind it by
 //! more than the sensor's depth uncertainty there. A bin with no measurement (no return,
 //! beyond range, outside the view) says nothing, so missing depth never erases anything.
+//!
+//! The frame's support planes add what it cannot see through but knows all the same: a voxel
+//! beyond a support (under the table, seen from above), in a direction where the nearest
+//! measured surface is that support, is hidden by it (`FreeSpace::hidden_under_support`). No
+//! part of an object standing on the support can be there; a smear of alignment there (a flat
+//! object sliding along itself, frame after frame of camera shake) is never seen through and
+//! would stay for ever.
 
 use glam::{Affine3A, Vec3};
 
@@ -60,6 +67,9 @@ pub struct FreeSpace {
     height: usize,
     /// Nearest depth along the optical axis per bin, metres; infinity for no measurement.
     nearest_m: Vec<f32>,
+    /// The frame's support planes, world frame: unit normal towards the sensor, and offset
+    /// (`normal·p = offset` on the plane).
+    supports: Vec<(Vec3, f32)>,
 }
 
 impl FreeSpace {
@@ -87,6 +97,7 @@ impl FreeSpace {
                 width: 0,
                 height: 0,
                 nearest_m: Vec::new(),
+                supports: Vec::new(),
             };
         }
         let span = (hi.0 - lo.0).max(hi.1 - lo.1).max(BIN_RAD);
@@ -104,6 +115,7 @@ impl FreeSpace {
             width,
             height,
             nearest_m: vec![f32::INFINITY; width * height],
+            supports: Vec::new(),
         };
         for (tx, ty, z) in projected {
             if let Some(bin) = image.bin(tx, ty) {
@@ -140,6 +152,66 @@ impl FreeSpace {
             }
             None => false,
         }
+    }
+
+    /// The same free space knowing the frame's support planes (world frame: unit normal,
+    /// offset with `normal·p = offset` on the plane; either orientation), for
+    /// [`FreeSpace::hidden_under_support`]. Normals are turned towards the sensor.
+    pub fn with_supports(mut self, supports: impl IntoIterator<Item = (Vec3, f32)>) -> Self {
+        let sensor = self.sensor_from_world.inverse().translation.into();
+        self.supports = supports
+            .into_iter()
+            .filter(|(n, d)| n.is_finite() && d.is_finite() && n.length_squared() > 0.5)
+            .map(|(n, d)| {
+                if n.dot(sensor) - d < 0.0 {
+                    (-n, -d)
+                } else {
+                    (n, d)
+                }
+            })
+            .collect();
+        self
+    }
+
+    /// The support planes (normal towards the sensor, offset), world frame.
+    pub fn supports(&self) -> &[(Vec3, f32)] {
+        &self.supports
+    }
+
+    /// Whether `p_in_world` lies beyond support `support` (an index into
+    /// [`FreeSpace::supports`]) by more than `margin` at its depth, in a direction where the
+    /// nearest surface measured is that support (within `margin` of it, and in front of `p`):
+    /// the support hides it. `false` where nothing was measured or something else is nearer
+    /// (an object on the table in front of `p` says nothing about the table there).
+    pub fn hidden_under_support(
+        &self,
+        p_in_world: Vec3,
+        support: usize,
+        margin: &DepthMargin,
+    ) -> bool {
+        let Some(&(normal, offset)) = self.supports.get(support) else {
+            return false;
+        };
+        let Some((tx, ty, z)) = project(&self.sensor_from_world, p_in_world) else {
+            return false;
+        };
+        if normal.dot(p_in_world) - offset >= -margin.at(z) {
+            return false;
+        }
+        let Some(bin) = self.bin(tx, ty) else {
+            return false;
+        };
+        let nearest = self.nearest_m[bin];
+        if !nearest.is_finite() || nearest >= z {
+            return false;
+        }
+        // The nearest measured surface in p's direction, back in the world frame.
+        let measured = self.sensor_from_world.inverse().transform_point3(Vec3::new(
+            tx * nearest,
+            ty * nearest,
+            nearest,
+        ));
+        (normal.dot(measured) - offset).abs() <= margin.at(nearest)
     }
 
     /// Bins holding a measurement (for logs and tests).
@@ -223,6 +295,41 @@ mod tests {
         let free = FreeSpace::from_points(&points, world_from_sensor);
         assert!(free.seen_through(Vec3::new(-1.0, 0.0, 0.0), &MARGIN));
         assert!(!free.seen_through(Vec3::new(0.5, 0.0, 0.0), &MARGIN));
+    }
+
+    /// A table (the plane y = 0.3 below a sensor at the origin, seen from above at a slant)
+    /// with a box standing on it, as measured points.
+    fn table_with_box() -> Vec<Vec3> {
+        let mut points: Vec<Vec3> = (0..300)
+            .flat_map(|i| {
+                (0..200)
+                    .map(move |j| Vec3::new(-0.6 + i as f32 * 0.004, 0.3, 0.4 + j as f32 * 0.006))
+            })
+            .collect();
+        // The box's front face, 10 cm tall, at z = 0.8.
+        points.extend((0..50).flat_map(|i| {
+            (0..25).map(move |j| Vec3::new(-0.1 + i as f32 * 0.004, 0.2 + j as f32 * 0.004, 0.8))
+        }));
+        points
+    }
+
+    #[test]
+    fn a_voxel_beneath_a_measured_support_is_hidden_by_it() {
+        let table = (Vec3::new(0.0, 1.0, 0.0), 0.3);
+        let free =
+            FreeSpace::from_points(&table_with_box(), Affine3A::IDENTITY).with_supports([table]);
+        // Normals are turned towards the sensor (above the table, y < 0.3).
+        assert_eq!(free.supports(), &[(Vec3::new(0.0, -1.0, 0.0), -0.3)]);
+        // 5 cm under the table top, in front of the box: the table hides it.
+        assert!(free.hidden_under_support(Vec3::new(0.3, 0.35, 0.9), 0, &MARGIN));
+        // On the table (within the margin) or above it: not hidden.
+        assert!(!free.hidden_under_support(Vec3::new(0.3, 0.305, 0.9), 0, &MARGIN));
+        assert!(!free.hidden_under_support(Vec3::new(0.3, 0.25, 0.9), 0, &MARGIN));
+        // Under the table behind the box: the box is the nearest surface there, not the table.
+        assert!(!free.hidden_under_support(Vec3::new(0.0, 0.32, 0.9), 0, &MARGIN));
+        // Beyond the measured table (no return there): nothing is known.
+        assert!(!free.hidden_under_support(Vec3::new(2.0, 0.4, 0.9), 0, &MARGIN));
+        assert!(!free.hidden_under_support(Vec3::new(0.3, 0.35, 0.9), 1, &MARGIN));
     }
 
     #[test]
