@@ -11,7 +11,8 @@
 //! weight cap, and would smear sub-voxel planes.
 //!
 //! Pose: each frame the cluster is aligned to the fused model (see `icp`), starting from the
-//! last pose moved on by a constant body-frame velocity. `world_from_object` changes only when
+//! last pose moved on by a constant body-frame velocity, if the last two measured motions agree
+//! (a steady motion; a shaken camera's jolts back and forth are not carried on). `world_from_object` changes only when
 //! the aligned pose differs from it by more than the move thresholds (a dead band), so a
 //! static object seen from a static camera keeps its pose exactly and noise never accumulates;
 //! slow motion adds up against the kept pose until it crosses a threshold. Points are always
@@ -59,6 +60,10 @@ pub struct Carved {
     pub dropped: usize,
 }
 
+/// Slack of [`BodyVelocity::steady_with`].
+const STEADY_SLACK_RAD_S: f32 = 0.05;
+const STEADY_SLACK_M_S: f32 = 0.01;
+
 /// Rigid velocity in the object's own frame, about its origin.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct BodyVelocity {
@@ -79,6 +84,17 @@ impl BodyVelocity {
             angular_rad_s: Quat::from_mat3a(&delta.matrix3).to_scaled_axis() / seconds,
             linear_m_s: Vec3::from(delta.translation) / seconds,
         }
+    }
+
+    /// Whether two measured velocities describe one steady motion: each part (turn and shift)
+    /// differs by at most the larger (a jolt back is twice as large), or both are slow (under
+    /// [`STEADY_SLACK_RAD_S`], [`STEADY_SLACK_M_S`]: a tenth of a degree and a third of a
+    /// millimetre a frame at 30 fps).
+    fn steady_with(&self, other: &Self) -> bool {
+        let close =
+            |a: Vec3, b: Vec3, slack: f32| (a - b).length() <= a.length().max(b.length()) + slack;
+        close(self.angular_rad_s, other.angular_rad_s, STEADY_SLACK_RAD_S)
+            && close(self.linear_m_s, other.linear_m_s, STEADY_SLACK_M_S)
     }
 
     /// The body-frame motion over `dt`.
@@ -113,7 +129,11 @@ pub struct TrackedObject {
     pub change: ChangeTracker,
     pub world_from_object: Affine3A,
     object_from_world: Affine3A,
+    /// The velocity the next pose is predicted with: the last measured one, if it agrees with
+    /// the one measured before it (`measured_velocity`); otherwise none.
     velocity: BodyVelocity,
+    /// The motion measured between the last two pose changes.
+    measured_velocity: BodyVelocity,
     /// When the pose last changed (or the object was created or reset), capture time.
     last_pose_change: Duration,
     pub last_seen: Duration,
@@ -181,6 +201,7 @@ impl TrackedObject {
             world_from_object: Affine3A::IDENTITY,
             object_from_world: Affine3A::IDENTITY,
             velocity: BodyVelocity::default(),
+            measured_velocity: BodyVelocity::default(),
             last_pose_change: capture_time,
             last_seen: capture_time,
             frames_seen: 0,
@@ -276,7 +297,17 @@ impl TrackedObject {
                 self.resets_in_a_row = 0;
                 if shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad {
                     let dt = capture_time.saturating_sub(self.last_pose_change);
-                    self.velocity = BodyVelocity::between(&self.world_from_object, &estimate, dt);
+                    // Only a steady motion is carried on: a shaken camera moves every object
+                    // back and forth, and carrying each jolt into the next frame's prediction
+                    // started alignments a jolt off, from where a flat face (a laptop lid on
+                    // the PCL Kinect frames) slid along itself, differently every run.
+                    let measured = BodyVelocity::between(&self.world_from_object, &estimate, dt);
+                    self.velocity = if measured.steady_with(&self.measured_velocity) {
+                        measured
+                    } else {
+                        BodyVelocity::default()
+                    };
+                    self.measured_velocity = measured;
                     self.set_pose(estimate);
                     self.last_pose_change = capture_time;
                     debug!(id = self.id, shift_m, turn_rad, "object moved");
@@ -286,6 +317,7 @@ impl TrackedObject {
                     // never accumulates into drift while slow motion still adds up against
                     // the kept pose until it crosses a threshold.
                     self.velocity = BodyVelocity::default();
+                    self.measured_velocity = BodyVelocity::default();
                     Observed::Still
                 }
             }
@@ -444,6 +476,7 @@ impl TrackedObject {
         self.coarse = MomentGrid::new(voxel_m * config.icp_coarse_factor as f32);
         self.change = ChangeTracker::new(config.occupied_cell_points, config.saturated_cell_points);
         self.velocity = BodyVelocity::default();
+        self.measured_velocity = BodyVelocity::default();
         self.points_fused = 0;
         self.bounds_in_object = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         self.last_pose_change = capture_time;
