@@ -271,9 +271,9 @@ fn area_m2(mesh: &TriMesh) -> f32 {
         .sum()
 }
 
-/// How far a mesh is from the camera: the length of the mean of 4000 surface samples, metres.
-fn mean_range_m(mesh: &TriMesh) -> f32 {
-    let samples = surface_samples(mesh, 4000);
+/// How far a mesh is from the camera (at the origin): the length of the mean of its surface
+/// samples, metres.
+fn mean_range_m(samples: &[Vec3]) -> f32 {
     (samples.iter().fold(Vec3::ZERO, |a, &p| a + p) / samples.len().max(1) as f32).length()
 }
 
@@ -481,7 +481,7 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
             converged = Some(
                 latest
                     .iter()
-                    .map(|(&id, m)| (id, (area_m2(m), mean_range_m(m))))
+                    .map(|(&id, m)| (id, (area_m2(m), mean_range_m(&surface_samples(m, 4000)))))
                     .collect(),
             );
         }
@@ -517,7 +517,7 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
         };
         let area = area_m2(mesh);
         let samples = surface_samples(mesh, 4000);
-        let range_m = mean_range_m(mesh);
+        let range_m = mean_range_m(&samples);
         let held = range_m <= HELD_WITHIN_M;
         let off = samples
             .iter()

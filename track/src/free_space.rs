@@ -59,6 +59,8 @@ impl DepthMargin {
 #[derive(Debug, Clone, PartialEq)]
 pub struct FreeSpace {
     sensor_from_world: Affine3A,
+    /// The sensor's position, world frame (the origin of every ray).
+    sensor_in_world: Vec3,
     /// Bins per unit of tangent (1 / bin width).
     bins_per_tan: f32,
     /// Bin of tangent 0 on each axis (so bin = floor(tan · bins_per_tan) + origin).
@@ -92,6 +94,7 @@ impl FreeSpace {
         if projected.is_empty() {
             return Self {
                 sensor_from_world,
+                sensor_in_world: world_from_sensor.translation.into(),
                 bins_per_tan: 1.0,
                 origin: (0, 0),
                 width: 0,
@@ -110,6 +113,7 @@ impl FreeSpace {
         let height = ((hi.1 * bins_per_tan).floor() as i32 + origin.1 + 1).max(1) as usize;
         let mut image = Self {
             sensor_from_world,
+            sensor_in_world: world_from_sensor.translation.into(),
             bins_per_tan,
             origin,
             width,
@@ -158,7 +162,7 @@ impl FreeSpace {
     /// offset with `normal·p = offset` on the plane; either orientation), for
     /// [`FreeSpace::hidden_under_support`]. Normals are turned towards the sensor.
     pub fn with_supports(mut self, supports: impl IntoIterator<Item = (Vec3, f32)>) -> Self {
-        let sensor = self.sensor_from_world.inverse().translation.into();
+        let sensor = self.sensor_in_world;
         self.supports = supports
             .into_iter()
             .filter(|(n, d)| n.is_finite() && d.is_finite() && n.length_squared() > 0.5)
@@ -205,12 +209,9 @@ impl FreeSpace {
         if !nearest.is_finite() || nearest >= z {
             return false;
         }
-        // The nearest measured surface in p's direction, back in the world frame.
-        let measured = self.sensor_from_world.inverse().transform_point3(Vec3::new(
-            tx * nearest,
-            ty * nearest,
-            nearest,
-        ));
+        // The nearest measured surface in p's direction: on p's ray, at its depth (depth along
+        // the optical axis grows in proportion along a ray).
+        let measured = self.sensor_in_world + (p_in_world - self.sensor_in_world) * (nearest / z);
         (normal.dot(measured) - offset).abs() <= margin.at(nearest)
     }
 

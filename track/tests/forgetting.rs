@@ -196,8 +196,9 @@ fn fused_points(map: &mut ObjectMap, now: Duration) -> Vec<Vec3> {
 /// A board standing on a table whose fused state reaches 6 cm under the table top (as a
 /// smear of alignment leaves it: no camera sees there, so nothing is ever seen through): with
 /// the table known as the frame's support, what lies under it beyond the carving margin (2 cm
-/// at 1 m, plus half a voxel) is forgotten within a second and the board above it stays; without supports it stays for ever. A board that hangs under a
-/// shelf (all of it beyond the shelf's plane) is hidden by the shelf, not forgotten.
+/// at 1 m, plus half a voxel) is forgotten within a second and the board above it stays;
+/// without supports it stays for ever. A board that hangs under a shelf (all of it beyond the
+/// shelf's plane) is hidden by the shelf, not forgotten.
 #[test]
 fn what_a_support_hides_of_an_object_standing_on_it_is_forgotten() {
     let table_plane = (Vec3::Y, 0.2);
