@@ -495,6 +495,13 @@ pub(crate) fn find_planes(
             viewpoint,
         );
     }
+    // Largest first, as RANSAC finds them: hinted planes come before the search's, and the
+    // scene model takes the first plane facing up for the table (`scene::plane_roles`). After
+    // mOSD scene 45, its table, 3.5° off scene 57's, refined into a plane 12° from the new
+    // table that held a strip of it and the feet of the objects there; found first, it was
+    // taken for the table and sliced two objects away, and as its own hint came back every
+    // frame. The real table, with twice its points, came second.
+    planes.sort_by_key(|plane| std::cmp::Reverse(plane.inliers.len()));
     planes
 }
 
