@@ -107,15 +107,6 @@ fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
         "osd_test57",
         "osd_test0",
     ];
-    // Still open (issue 11): after the seven-object scene 45, two of the sixteen objects of
-    // the cluttered scene 57 stand where scene 45's objects stood. Their clusters are taken by
-    // the old tracks (by centroid). A still track that would have to jump to take a cluster
-    // that only partly lands on it now restarts from the cluster, but the clusters then hop
-    // between the several stale tracks there, each restart waits for its mesh, and for the
-    // first 1.2 s nothing new is published at those two places. Its figures are printed but
-    // not asserted until association weighs shape as well as position; every other scene is
-    // held to the bounds 1.2 s after the switch.
-    const NOT_YET_HELD: [&str; 1] = ["osd_test57"];
     const FRAMES_PER_SCENE: usize = 90;
     // 1.2 s into a scene. What the camera sees through is gone within a few frames; but an
     // old object hidden behind the new scene's objects cannot be seen through (it may still be
@@ -193,7 +184,7 @@ fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
                 mesh.triangles.len(),
                 off * 1e3
             );
-            if off >= 0.01 && !NOT_YET_HELD.contains(&scene.name) {
+            if off >= 0.01 {
                 failures.push(format!(
                     "{} (scene {checked}): object {id} lies {:.1} mm (median) off the scene \
                      ({age_s:.1} s old)",
@@ -219,7 +210,7 @@ fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
                 points.len(),
                 covered * 100.0
             );
-            if covered < 0.5 && !NOT_YET_HELD.contains(&scene.name) {
+            if covered < 0.5 {
                 failures.push(format!(
                     "{} (scene {checked}): labelled object {label} ({} points) is not \
                      published ({:.0} % covered)",

@@ -212,6 +212,7 @@ impl ObjectMap {
                 continue;
             };
             report.cluster_ids[ci] = Some(id);
+            tracing::trace!(id, points = points.len(), centroid = %centroid, "cluster matched");
             match object.observe(
                 points,
                 *centroid,
