@@ -245,3 +245,93 @@ fn what_a_support_hides_of_an_object_standing_on_it_is_forgotten() {
     assert_eq!(map.len(), 1, "the board under the shelf was removed");
     assert_eq!(cells(&map), before, "voxels under the shelf were forgotten");
 }
+
+/// A moving camera with poses (slambook's `pose.txt`) sees each object from two places, and its
+/// poses are a few centimetres off each other (slambook's two frames by about 4 cm and 1.1°):
+/// each view's points land a little off the other's, and each view's free space passes close
+/// by the other view's surfaces. Each object should still be one object fused from both views:
+/// both views' clusters go to the same id, and nothing is carved away or born again.
+///
+/// Still open (issue 11): it is not. The first view-B frame aligns each object onto B's points
+/// (the pose error and B's other faces put B's cluster centroid 6 cm from A's), so the object
+/// moves to where B's poses put it; in the next view-A frame its predicted centroid is beyond
+/// the match distance of A's cluster, and A's cluster is born again: a new pair of objects every
+/// two frames, as on the TUM desk's two unposed views. The tracker takes each view's offset
+/// for the objects' motion; what is missing is an estimate of the camera's own error shared by
+/// every static object (the support and the still objects moving together), applied to the
+/// frame before the objects are aligned.
+#[test]
+#[ignore = "issue 11, still open: a pose error is taken for the objects' motion"]
+fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each() {
+    use glam::Quat;
+    let mut rng = rng(7);
+    let places = [at(-0.15, 0.0, 1.0), at(0.15, 0.05, 1.1)];
+    let sphere = util::Body::Sphere { radius_m: 0.06 };
+    let bodies = [CUBE, sphere];
+    // View A at the origin; view B 0.3 m to the right and 0.1 m forward, turned 15° towards
+    // the objects. B's reported pose is 4 cm and 1.1° off its true one, so its points are
+    // deprojected (and its free space projected) through the wrong pose.
+    let true_b = Affine3A::from_rotation_translation(
+        Quat::from_rotation_y(-15f32.to_radians()),
+        Vec3::new(0.3, 0.0, 0.1),
+    );
+    let error = Affine3A::from_rotation_translation(
+        Quat::from_rotation_x(1.1f32.to_radians()),
+        Vec3::new(0.03, -0.02, 0.02),
+    );
+    let reported_b = true_b * error;
+    let seen_as_reported_b = reported_b * true_b.inverse();
+    let mut map = patient_map();
+    let mut ids_per_view: [std::collections::BTreeSet<u64>; 2] = Default::default();
+    for index in 0..40u32 {
+        let from_b = index % 2 == 1;
+        let (viewpoint, world_from_sensor) = if from_b {
+            (Vec3::from(reported_b.translation), reported_b)
+        } else {
+            (Vec3::ZERO, Affine3A::IDENTITY)
+        };
+        let true_viewpoint = if from_b {
+            Vec3::from(true_b.translation)
+        } else {
+            Vec3::ZERO
+        };
+        let mut clusters: Vec<Vec<Vec3>> = bodies
+            .iter()
+            .zip(&places)
+            .map(|(&body, &place)| view(body, place, true_viewpoint, 3000, 0.002, &mut rng))
+            .collect();
+        let mut background = wall(1.6);
+        if from_b {
+            for p in clusters.iter_mut().flatten().chain(background.iter_mut()) {
+                *p = seen_as_reported_b.transform_point3(*p);
+            }
+        }
+        let mut all = background;
+        all.extend(clusters.iter().flatten());
+        let report = map.integrate(&FrameClusters {
+            capture_time: FRAME * index,
+            viewpoint_m: viewpoint,
+            free_space: Some(FreeSpace::from_points(&all, world_from_sensor)),
+            clusters,
+        });
+        assert!(
+            report.removed.is_empty(),
+            "frame {index}: {:?} removed while in view",
+            report.removed
+        );
+        if index >= 4 {
+            assert!(
+                report.created.is_empty(),
+                "frame {index}: {:?} born again",
+                report.created
+            );
+            ids_per_view[usize::from(from_b)].extend(report.cluster_ids.iter().flatten());
+        }
+    }
+    assert_eq!(map.len(), 2, "one object per body");
+    assert_eq!(
+        ids_per_view[0], ids_per_view[1],
+        "both views' clusters go to the same objects"
+    );
+    assert_eq!(ids_per_view[0].len(), 2);
+}
