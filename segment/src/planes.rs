@@ -33,9 +33,9 @@ const HYPOTHESES: usize = 400;
 /// Hypotheses are scored on at most this many candidates (a fixed random subset).
 const SCORE_SAMPLE: usize = 20_000;
 
-/// Preemptive scoring (Nistér 2003): every hypothesis is first scored on the first
-/// `PREEMPT_SAMPLE` points of the scoring sample, and only the best [`PREEMPT_KEEP`] on all of
-/// it. A plane worth finding holds hundreds of those points, so its best hypotheses are among
+/// Preemptive scoring (Nistér 2003): every hypothesis is first scored on `PREEMPT_SAMPLE`
+/// points spread evenly through the scoring sample, and only the best [`PREEMPT_KEEP`] on all
+/// of it. A plane worth finding holds hundreds of those points, so its best hypotheses are among
 /// the kept ones; the search costs a tenth of scoring every hypothesis on the whole sample
 /// (the daemon runs one search per frame after its hints, which was a tenth of its CPU time on
 /// the TUM desk).
@@ -486,11 +486,15 @@ pub(crate) fn find_planes(
             .collect();
         // Ties go to the earliest hypothesis so that the result is deterministic.
         let ranked = |a: &(usize, usize), b: &(usize, usize)| a.0.cmp(&b.0).then(b.1.cmp(&a.1));
-        let first = &sample[..sample.len().min(PREEMPT_SAMPLE)];
+        // An even stride through the sample: when the candidates are fewer than
+        // SCORE_SAMPLE, the sample is all of them in image order, and its first points would
+        // be the top rows of the image only.
+        let stride = sample.len().div_ceil(PREEMPT_SAMPLE).max(1);
+        let first: Vec<(Vec3, f32)> = sample.iter().step_by(stride).copied().collect();
         let mut preliminary: Vec<(usize, usize)> = hypotheses
             .par_iter()
             .enumerate()
-            .map(|(k, &h)| (score(first, h), k))
+            .map(|(k, &h)| (score(&first, h), k))
             .collect();
         preliminary.sort_unstable_by(|a, b| ranked(b, a));
         preliminary.truncate(PREEMPT_KEEP);
