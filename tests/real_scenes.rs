@@ -96,17 +96,7 @@ fn scene(name: &'static str) -> Scene {
 /// least half of its points within 2 cm of a published object's surface).
 #[test]
 fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
-    const NAMES: [&str; 9] = [
-        "osd_test0",
-        "osd_test17",
-        "osd_test20",
-        "osd_test26",
-        "osd_test35",
-        "osd_test38",
-        "osd_test45",
-        "osd_test57",
-        "osd_test0",
-    ];
+    const NAMES: [&str; 9] = tacmesh_testdata::MOSD_SCENE_CHANGE;
     const FRAMES_PER_SCENE: usize = 90;
     // 1.2 s into a scene. What the camera sees through is gone within a few frames; but an
     // old object hidden behind the new scene's objects cannot be seen through (it may still be

@@ -327,28 +327,17 @@ fn iou_on_the_eight_labelled_scans() {
 
 /// The daemon passes each frame's planes to the next as hints. When the scene changes, the
 /// last scene's planes must not change how the new one is segmented: after mOSD scene 45, its
-/// table and a box top refined into planes through scene 57's table that were taken as
-/// supports and cut two of its objects away, frame after frame. Each scan of the scene-change
-/// sequence (`tests/real_scenes.rs`) segmented with the previous scan's hints gives the objects
-/// it gives alone: as many, each within 2 % of its size.
+/// table refined into a plane through a strip of scene 57's table and the feet of two objects,
+/// was taken for the table ahead of the real one and cut those objects away, frame after
+/// frame. Each scan of the scene-change sequence segmented with the previous scan's hints
+/// gives the objects it gives alone: as many, each within 2 % of its size.
 #[test]
 fn the_last_scenes_planes_do_not_change_the_next_scenes_objects() {
-    const SEQUENCE: [&str; 9] = [
-        "osd_test0",
-        "osd_test17",
-        "osd_test20",
-        "osd_test26",
-        "osd_test35",
-        "osd_test38",
-        "osd_test45",
-        "osd_test57",
-        "osd_test0",
-    ];
     let config = SegmentConfig::live();
     let sizes = |objects: &[Vec<u32>]| objects.iter().map(Vec::len).collect::<Vec<_>>();
     let mut hints = Vec::new();
     let mut previous = "(none)";
-    for name in SEQUENCE {
+    for name in tacmesh_testdata::MOSD_SCENE_CHANGE {
         let path = format!("pointclouds/mosd/{name}.pcd");
         let cloud = read_pcd(&tacmesh_testdata::path(&path)).expect("the scan reads");
         let (w, h) = (cloud.width, cloud.height);

@@ -4,6 +4,8 @@
 //! - [`path`]: a data file's path, or a panic that names the file and where it should be.
 //! - [`bytes`]: a data file's contents, with the same message when it is missing.
 //! - [`DIR`]: the folder itself, for tools (the fuzz corpus builder, benchmarks) that list it.
+//! - [`MOSD_SCENE_CHANGE`]: the labelled mOSD scans in the order the scene-change tests play
+//!   them.
 //!
 //! Tests reach the data only through here, so a missing file reads as a missing file (which
 //! one, where it was looked for, how to get it back), never as a bare `No such file` from deep
@@ -13,6 +15,22 @@ use std::path::{Path, PathBuf};
 
 /// The test-data folder of the repository (`testdata/`), as an absolute path.
 pub const DIR: &str = env!("CARGO_MANIFEST_DIR");
+
+/// The labelled mOSD scans (`pointclouds/mosd/NAME.pcd`) in the order the scene-change tests
+/// play them as one recording: the eight scans, then the first again. The daemon's test
+/// (`tests/real_scenes.rs`) plays them live; the segmenter's (`segment/tests/real_data.rs`)
+/// segments each after the previous one's planes.
+pub const MOSD_SCENE_CHANGE: [&str; 9] = [
+    "osd_test0",
+    "osd_test17",
+    "osd_test20",
+    "osd_test26",
+    "osd_test35",
+    "osd_test38",
+    "osd_test45",
+    "osd_test57",
+    "osd_test0",
+];
 
 /// The path of `relative` (for example `"pointclouds/pcl/milk.pcd"`) in the test data.
 ///
