@@ -13,11 +13,11 @@
 //! Pose: each frame the cluster is aligned to the fused model (see `icp`), starting from the
 //! last pose moved on by a constant body-frame velocity, if the last two measured motions agree
 //! (a steady motion; a shaken camera's jolts back and forth are not carried on).
-//! `world_from_object` changes only when the aligned pose differs from it by more than the move thresholds (a dead band), so a
-//! static object seen from a static camera keeps its pose exactly and noise never accumulates;
-//! slow motion adds up against the kept pose until it crosses a threshold. Points are always
-//! fused with the published pose; below the thresholds that smears the model by less than half
-//! a voxel. The object frame starts axis-aligned with its origin at the first cluster's
+//! `world_from_object` changes only when the aligned pose differs from it by more than the
+//! move thresholds (a dead band), so a static object seen from a static camera keeps its pose
+//! exactly and noise never accumulates; slow motion adds up against the kept pose until it
+//! crosses a threshold. Points are always fused with the published pose; below the thresholds
+//! that smears the model by less than half a voxel. The object frame starts axis-aligned with its origin at the first cluster's
 //! centroid, which keeps the alignment well conditioned.
 //!
 //! Failure: if the cluster cannot be aligned (too few points near the fused surface, or too

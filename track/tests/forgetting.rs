@@ -266,8 +266,7 @@ fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each
     use glam::Quat;
     let mut rng = rng(7);
     let places = [at(-0.15, 0.0, 1.0), at(0.15, 0.05, 1.1)];
-    let sphere = util::Body::Sphere { radius_m: 0.06 };
-    let bodies = [CUBE, sphere];
+    let bodies = [CUBE, Body::Sphere { radius_m: 0.06 }];
     // View A at the origin; view B 0.3 m to the right and 0.1 m forward, turned 15° towards
     // the objects. B's reported pose is 4 cm and 1.1° off its true one, so its points are
     // deprojected (and its free space projected) through the wrong pose.
@@ -285,16 +284,14 @@ fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each
     let mut ids_per_view: [std::collections::BTreeSet<u64>; 2] = Default::default();
     for index in 0..40u32 {
         let from_b = index % 2 == 1;
-        let (viewpoint, world_from_sensor) = if from_b {
-            (Vec3::from(reported_b.translation), reported_b)
+        // Where the camera really is, and where its pose says it is.
+        let (true_sensor, world_from_sensor) = if from_b {
+            (true_b, reported_b)
         } else {
-            (Vec3::ZERO, Affine3A::IDENTITY)
+            (Affine3A::IDENTITY, Affine3A::IDENTITY)
         };
-        let true_viewpoint = if from_b {
-            Vec3::from(true_b.translation)
-        } else {
-            Vec3::ZERO
-        };
+        let true_viewpoint = Vec3::from(true_sensor.translation);
+        let viewpoint = Vec3::from(world_from_sensor.translation);
         let mut clusters: Vec<Vec<Vec3>> = bodies
             .iter()
             .zip(&places)
