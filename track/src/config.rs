@@ -108,6 +108,10 @@ pub struct TrackConfig {
     /// unobservable and kept at the prediction. Default 0.05 (a partial sphere's spin scores
     /// about 0.02, a cube's worst-seen face about 0.1).
     pub icp_degenerate_ratio: f32,
+    /// Estimate each frame's camera error from the objects that stand still and correct the
+    /// frame by it before aligning any object (see `crate::camera_error`). Default true; off,
+    /// a pose error moves every object.
+    pub estimate_camera_error: bool,
 }
 
 impl TrackConfig {
@@ -117,6 +121,17 @@ impl TrackConfig {
         crate::free_space::DepthMargin {
             margin_m: self.carve_margin_m,
             per_m2: self.carve_margin_per_m2,
+        }
+    }
+
+    /// The alignment's settings (the accepted residual before widening for range noise).
+    pub fn icp_settings(&self) -> crate::icp::IcpSettings {
+        crate::icp::IcpSettings {
+            min_inliers: self.icp_min_inliers,
+            min_inlier_fraction: self.icp_min_inlier_fraction,
+            max_rms_m: self.icp_max_rms_m,
+            prior_weight: self.icp_prior_weight,
+            degenerate_ratio: self.icp_degenerate_ratio,
         }
     }
 
@@ -165,6 +180,7 @@ impl Default for TrackConfig {
             icp_min_inliers: 30,
             icp_prior_weight: 1e-3,
             icp_degenerate_ratio: 0.02,
+            estimate_camera_error: true,
         }
     }
 }

@@ -215,6 +215,25 @@ impl FreeSpace {
         (normal.dot(measured) - offset).abs() <= margin.at(nearest)
     }
 
+    /// The same free space in a world moved by `new_from_old` (the tracker's correction of a
+    /// camera pose that was off, see `crate::camera_error`): the range image is unchanged, the
+    /// sensor and the supports move with the world.
+    pub fn moved(&self, new_from_old: &Affine3A) -> Self {
+        Self {
+            sensor_from_world: self.sensor_from_world * new_from_old.inverse(),
+            sensor_in_world: new_from_old.transform_point3(self.sensor_in_world),
+            supports: self
+                .supports
+                .iter()
+                .map(|&(normal, offset)| {
+                    let normal = new_from_old.transform_vector3(normal);
+                    (normal, offset + normal.dot(new_from_old.translation.into()))
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// Bins holding a measurement (for logs and tests).
     pub fn measured_bins(&self) -> usize {
         self.nearest_m.iter().filter(|d| d.is_finite()).count()
@@ -331,6 +350,41 @@ mod tests {
         // Beyond the measured table (no return there): nothing is known.
         assert!(!free.hidden_under_support(Vec3::new(2.0, 0.4, 0.9), 0, &MARGIN));
         assert!(!free.hidden_under_support(Vec3::new(0.3, 0.35, 0.9), 1, &MARGIN));
+    }
+
+    /// A frame whose world is moved answers for the moved points as the original did for the
+    /// original ones, supports included.
+    #[test]
+    fn a_moved_free_space_answers_for_moved_points() {
+        let table = (Vec3::new(0.0, 1.0, 0.0), 0.3);
+        let free =
+            FreeSpace::from_points(&table_with_box(), Affine3A::IDENTITY).with_supports([table]);
+        let new_from_old = Affine3A::from_rotation_translation(
+            glam::Quat::from_rotation_x(0.2) * glam::Quat::from_rotation_y(-0.3),
+            Vec3::new(0.1, -0.05, 0.3),
+        );
+        let moved = free.moved(&new_from_old);
+        for p in [
+            Vec3::new(0.3, 0.35, 0.9),
+            Vec3::new(0.3, 0.25, 0.9),
+            Vec3::new(0.0, 0.32, 0.9),
+            Vec3::new(0.05, 0.25, 0.6),
+        ] {
+            let q = new_from_old.transform_point3(p);
+            assert_eq!(
+                free.seen_through(p, &MARGIN),
+                moved.seen_through(q, &MARGIN)
+            );
+            assert_eq!(
+                free.hidden_under_support(p, 0, &MARGIN),
+                moved.hidden_under_support(q, 0, &MARGIN)
+            );
+        }
+        assert!(moved.hidden_under_support(
+            new_from_old.transform_point3(Vec3::new(0.3, 0.35, 0.9)),
+            0,
+            &MARGIN
+        ));
     }
 
     #[test]

@@ -416,3 +416,155 @@ pub fn align_to_grids(
         rms_m,
     })
 }
+
+/// One object's share of a joint alignment: its grids (coarse to fine, as in
+/// [`align_to_grids`]), where it stands, and a sample of this frame's points of it (world).
+pub struct JointPart<'a> {
+    pub levels: [IcpLevel<'a>; 2],
+    pub object_from_world: Affine3A,
+    pub points_in_world: Vec<Vec3>,
+}
+
+/// The outcome of [`align_jointly`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointAlignment {
+    /// Maps the frame's world points onto every part's model at once.
+    pub corrected_from_world: Affine3A,
+    /// Per part, the share of its points within the fine level's rejection distance of its
+    /// model.
+    pub shares: Vec<f32>,
+}
+
+/// One rigid motion of the whole frame that lands every part's points on its own model at
+/// that model's current pose: point-to-plane ICP as in [`align_to_grids`], with every part's
+/// correspondences in one set of normal equations. A camera whose pose is off moves every
+/// still object by the same motion; each object alone sees only its own surface (a sphere
+/// cannot tell a turn, a box seen from one face a slide), all of them together see the
+/// camera's error in every direction.
+///
+/// The rows are written in the world frame about the parts' common centroid (so rotations are
+/// conditioned as in a single object): a model plane `(c, n)` in object frame `i` is the
+/// world plane `(R_iᵀ(c − t_i), R_iᵀ n)`. Directions no part constrains stay at the guess.
+pub fn align_jointly(
+    parts: &[JointPart],
+    guess: Affine3A,
+    settings: &IcpSettings,
+) -> Result<JointAlignment, IcpFailure> {
+    let total: usize = parts.iter().map(|p| p.points_in_world.len()).sum();
+    if total == 0 {
+        return Err(IcpFailure::Degenerate);
+    }
+    let centre = parts
+        .iter()
+        .flat_map(|p| &p.points_in_world)
+        .fold(DVec3::ZERO, |s, p| s + p.as_dvec3())
+        / total as f64;
+    // One plane cache per part and level: parts are different objects.
+    let mut caches: Vec<[FxHashMap<IVec3, Option<Plane>>; 2]> =
+        parts.iter().map(|_| Default::default()).collect();
+    let mut corrected_from_world = guess;
+    let mut moved = [0.0f64; 6];
+    let rounds = parts
+        .first()
+        .map_or([0, 0], |p| p.levels.map(|l| l.iterations * 3));
+    for (level, &iterations) in rounds.iter().enumerate() {
+        for _ in 0..iterations {
+            let mut eq = NormalEquations::default();
+            for (part, cache) in parts.iter().zip(&mut caches) {
+                accumulate_joint(
+                    &part.levels[level],
+                    &mut cache[level],
+                    part,
+                    &corrected_from_world,
+                    centre,
+                    &mut eq,
+                );
+            }
+            if eq.inliers < 6 {
+                break;
+            }
+            let x = gauss_newton_step(&eq, None, &moved, settings)?;
+            for (m, v) in moved.iter_mut().zip(x) {
+                *m += v;
+            }
+            let omega = DVec3::new(x[0], x[1], x[2]);
+            let t = DVec3::new(x[3], x[4], x[5]);
+            // p ↦ centre + R(ω)·(p − centre) + t
+            let step = Affine3A::from_translation((centre + t).as_vec3())
+                * Affine3A::from_quat(Quat::from_scaled_axis(omega.as_vec3()))
+                * Affine3A::from_translation(-centre.as_vec3());
+            corrected_from_world = step * corrected_from_world;
+            if omega.length() < CONVERGED_STEP && t.length() < CONVERGED_STEP {
+                break;
+            }
+        }
+    }
+    let shares = parts
+        .iter()
+        .zip(&mut caches)
+        .map(|(part, cache)| fine_share(part, &mut cache[1], &corrected_from_world))
+        .collect();
+    Ok(JointAlignment {
+        corrected_from_world,
+        shares,
+    })
+}
+
+/// Per part, the share of its points within the fine level's rejection distance of its model
+/// with the frame moved by `corrected_from_world` (as [`JointAlignment::shares`]).
+pub fn joint_shares(parts: &[JointPart], corrected_from_world: &Affine3A) -> Vec<f32> {
+    parts
+        .iter()
+        .map(|part| fine_share(part, &mut FxHashMap::default(), corrected_from_world))
+        .collect()
+}
+
+fn fine_share(
+    part: &JointPart,
+    cache: &mut FxHashMap<IVec3, Option<Plane>>,
+    corrected_from_world: &Affine3A,
+) -> f32 {
+    let mut eq = NormalEquations::default();
+    accumulate_joint(
+        &part.levels[1],
+        cache,
+        part,
+        corrected_from_world,
+        DVec3::ZERO,
+        &mut eq,
+    );
+    eq.inliers as f32 / part.points_in_world.len().max(1) as f32
+}
+
+/// Adds one part's inliers under `corrected_from_world` to `eq`, as world-frame rows about
+/// `centre` (see [`align_jointly`]).
+fn accumulate_joint(
+    level: &IcpLevel,
+    cache: &mut FxHashMap<IVec3, Option<Plane>>,
+    part: &JointPart,
+    corrected_from_world: &Affine3A,
+    centre: DVec3,
+    eq: &mut NormalEquations,
+) {
+    let reject = f64::from(level.reject_m);
+    let world_from_object = part.object_from_world.inverse();
+    for &p in &part.points_in_world {
+        let corrected = corrected_from_world.transform_point3(p);
+        let q = part.object_from_world.transform_point3(corrected);
+        let cell = level.grid.cell_of(q);
+        let plane = *cache
+            .entry(cell)
+            .or_insert_with(|| plane_near(level.grid, cell));
+        let Some(plane) = plane else { continue };
+        let r = f64::from(plane.normal.dot(q - plane.point));
+        if r.abs() > reject {
+            continue;
+        }
+        let normal = world_from_object.transform_vector3(plane.normal).as_dvec3();
+        let lever = corrected.as_dvec3() - centre;
+        add_row(&mut eq.h, &mut eq.g, lever, normal, r, 1.0);
+        eq.inliers += 1;
+        eq.sum_r2 += r * r;
+        eq.sum_q2 += lever.length_squared();
+    }
+}

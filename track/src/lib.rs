@@ -13,12 +13,14 @@
 //!   was held back from meshing, with why ([`HeldBack`]).
 //! - [`ObjectMap::objects`]: an [`ObjectSummary`] per object.
 //!
-//! Modules, in the order a frame runs through them: [`associate`] (greedy nearest centroids),
+//! Modules, in the order a frame runs through them: [`camera_error`] (one correction of the
+//! frame from the still objects, for a camera whose pose is off), [`associate`] (greedy nearest centroids),
 //! [`icp`] (point-to-plane alignment to the fused moments, with [`solve6`]), [`object`]
 //! (pose dead band, fusion with a weight cap), [`free_space`] (what the frame saw through,
 //! which the objects forget), [`change`] (the dirty measure), [`object_map`] (the whole).
 
 pub mod associate;
+pub mod camera_error;
 pub mod change;
 pub mod config;
 pub mod free_space;

@@ -402,24 +402,10 @@ impl TrackedObject {
     ) -> Result<(Affine3A, f32), IcpFailure> {
         let share =
             |a: &crate::icp::Alignment| a.inliers as f32 / points_in_world.len().max(1) as f32;
-        let levels = [
-            IcpLevel {
-                grid: &self.coarse,
-                iterations: config.icp_coarse_iterations,
-                reject_m: config.icp_reject_voxels * self.coarse.voxel_size_m(),
-            },
-            IcpLevel {
-                grid: &self.grid,
-                iterations: config.icp_fine_iterations,
-                reject_m: config.icp_reject_voxels * self.grid.voxel_size_m(),
-            },
-        ];
+        let levels = self.icp_levels(config);
         let settings = IcpSettings {
-            min_inliers: config.icp_min_inliers,
-            min_inlier_fraction: config.icp_min_inlier_fraction,
             max_rms_m: config.icp_max_rms_m.max(1.5 * noise_m),
-            prior_weight: config.icp_prior_weight,
-            degenerate_ratio: config.icp_degenerate_ratio,
+            ..config.icp_settings()
         };
         let anchor = Some(CentroidAnchor {
             centroid_in_world,
@@ -454,6 +440,22 @@ impl TrackedObject {
             }
         }
         last
+    }
+
+    /// The fused grids as alignment levels, coarse then fine.
+    pub(crate) fn icp_levels(&self, config: &TrackConfig) -> [IcpLevel<'_>; 2] {
+        [
+            IcpLevel {
+                grid: &self.coarse,
+                iterations: config.icp_coarse_iterations,
+                reject_m: config.icp_reject_voxels * self.coarse.voxel_size_m(),
+            },
+            IcpLevel {
+                grid: &self.grid,
+                iterations: config.icp_fine_iterations,
+                reject_m: config.icp_reject_voxels * self.grid.voxel_size_m(),
+            },
+        ]
     }
 
     fn set_pose(&mut self, world_from_object: Affine3A) {

@@ -10,6 +10,7 @@ use tacmesh_reconstruct::moment_grid::MomentGrid;
 use tracing::{debug, info};
 
 use crate::associate::associate_greedy;
+use crate::camera_error::CameraError;
 use crate::config::{TrackConfig, TrackError};
 use crate::free_space::FreeSpace;
 use crate::icp::IcpScratch;
@@ -57,6 +58,10 @@ pub struct FrameReport {
     /// The object each input cluster went to, in input order; `None` for clusters ignored
     /// (fewer than `min_cluster_points` finite points).
     pub cluster_ids: Vec<Option<u64>>,
+    /// The correction of the camera's pose the frame was fused with: maps the frame's world
+    /// (as its pose put it) onto the map's (see `crate::camera_error`). Identity while no
+    /// error was found.
+    pub camera_correction: Affine3A,
 }
 
 /// One object to mesh: its fused state, a copy the mesher owns.
@@ -140,6 +145,7 @@ pub struct ObjectMap {
     next_id: u64,
     meshing_runs: u64,
     scratch: IcpScratch,
+    camera: CameraError,
 }
 
 /// A cluster's finite points and centroid, or `None` if too few.
@@ -169,6 +175,7 @@ impl ObjectMap {
             next_id: 1,
             meshing_runs: 0,
             scratch: IcpScratch::default(),
+            camera: CameraError::default(),
         })
     }
 
@@ -186,11 +193,36 @@ impl ObjectMap {
             ..Default::default()
         };
 
-        let cleaned: Vec<Option<(Vec<Vec3>, Vec3)>> = frame
+        let mut cleaned: Vec<Option<(Vec<Vec3>, Vec3)>> = frame
             .clusters
             .iter()
             .map(|c| clean_cluster(c, self.config.min_cluster_points))
             .collect();
+
+        // The camera's error first: every later step works in the map's world.
+        let correction = if self.config.estimate_camera_error {
+            self.camera
+                .estimate(&cleaned, &self.objects, now, &self.config)
+        } else {
+            Affine3A::IDENTITY
+        };
+        report.camera_correction = correction;
+        let corrected = correction != Affine3A::IDENTITY;
+        if corrected {
+            for (points, centroid) in cleaned.iter_mut().flatten() {
+                for p in points.iter_mut() {
+                    *p = correction.transform_point3(*p);
+                }
+                *centroid = correction.transform_point3(*centroid);
+            }
+        }
+        let viewpoint = correction.transform_point3(frame.viewpoint_m);
+        let moved_free = frame
+            .free_space
+            .as_ref()
+            .filter(|_| corrected)
+            .map(|free| free.moved(&correction));
+        let free_space = moved_free.as_ref().or(frame.free_space.as_ref());
 
         let ids: Vec<u64> = self.objects.keys().copied().collect();
         let predicted: Vec<Vec3> = self
@@ -217,8 +249,8 @@ impl ObjectMap {
                 points,
                 *centroid,
                 now,
-                frame.viewpoint_m,
-                frame.free_space.as_ref(),
+                viewpoint,
+                free_space,
                 &self.config,
                 &mut self.scratch,
             ) {
@@ -273,7 +305,7 @@ impl ObjectMap {
                     // the object's last viewpoint, a separate cluster inside the box is
                     // another object beside or on top of it (taking those in merged
                     // stacked objects and grew a box that then took in the next scene's).
-                    let inside = if o.seen_from_another_side(frame.viewpoint_m) {
+                    let inside = if o.seen_from_another_side(viewpoint) {
                         points
                             .iter()
                             .filter(|p| p.cmpge(lo).all() && p.cmple(hi).all())
@@ -306,8 +338,7 @@ impl ObjectMap {
             }
             let id = self.next_id;
             self.next_id += 1;
-            let object =
-                TrackedObject::new(id, points, *centroid, now, frame.viewpoint_m, &self.config);
+            let object = TrackedObject::new(id, points, *centroid, now, viewpoint, &self.config);
             info!(id, points = points.len(), centroid = %centroid, "object appeared");
             self.objects.insert(id, object);
             report.created.push(id);
@@ -318,7 +349,7 @@ impl ObjectMap {
         // through: they are the nearest surface in their direction). An object left with less
         // than a cluster's worth of weight was taken away, or was never there (a smear of a
         // bad alignment): it is gone now, not `leave_after` later.
-        if let Some(free) = &frame.free_space {
+        if let Some(free) = free_space {
             let mut vanished = Vec::new();
             for object in self.objects.values_mut() {
                 let carved = object.carve(free, &self.config);

@@ -502,3 +502,61 @@ fn end_of_stream_flushes_what_was_held_back() {
     assert_eq!(flushed.len(), 1);
     assert_eq!(flushed[0].1, HeldBack::RateLimited);
 }
+
+/// The camera's error is estimated from the objects that stand still together
+/// (`tacmesh_track::camera_error`); a hand moving one of three objects past a still camera is
+/// that object's motion, not the camera's: the frame is never corrected, the moved object
+/// follows the hand, and the other two never move.
+#[test]
+fn a_hand_moving_one_of_three_objects_does_not_move_the_camera() {
+    let mut rng = rng(9);
+    let mut map = map();
+    let sphere = at(-0.2, 0.0, 0.8);
+    let small = posed(Quat::from_rotation_y(0.4), Vec3::new(0.2, 0.05, 0.9));
+    let start = posed(
+        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
+        Vec3::new(0.0, -0.1, 0.7),
+    );
+    let mut first_pose = Affine3A::IDENTITY;
+    for i in 0..40u32 {
+        // Still for ten frames, then the cube slides 1 cm a frame towards the camera's right.
+        let slid = at(0.01 * i.saturating_sub(10) as f32, 0.0, 0.0) * start;
+        let clusters = vec![
+            view(SPHERE, sphere, Vec3::ZERO, 2000, SIGMA_M, &mut rng),
+            view(
+                Body::Cube { half_m: 0.04 },
+                small,
+                Vec3::ZERO,
+                2000,
+                SIGMA_M,
+                &mut rng,
+            ),
+            view(CUBE, slid, Vec3::ZERO, 2000, SIGMA_M, &mut rng),
+        ];
+        let report = map.integrate(&frame(i, clusters));
+        assert_eq!(report.camera_correction, Affine3A::IDENTITY, "frame {i}");
+        assert_eq!(
+            report.cluster_ids,
+            vec![Some(1), Some(2), Some(3)],
+            "frame {i}"
+        );
+        assert!(
+            report.moved.iter().all(|&(id, _)| id == 3),
+            "frame {i}: {:?}",
+            report.moved
+        );
+        let pose = map
+            .objects()
+            .find(|o| o.id == 3)
+            .expect("the cube")
+            .world_from_object;
+        if i == 0 {
+            first_pose = pose;
+        }
+        let (shift, _) = pose_error(&(slid * start.inverse() * first_pose), &pose);
+        assert!(
+            shift < 0.008,
+            "frame {i}: the cube is {shift} m off the hand"
+        );
+    }
+}
