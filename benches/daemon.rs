@@ -1,6 +1,7 @@
 //! The live daemon under its default load: `cargo bench --bench daemon [-- SECONDS [SPEC
-//! [paced]]]`. A `replay:` SPEC is played looped at maximum rate (`--unpaced --loop`), the
-//! recordings' throughput benchmark; with `paced` after it, at its recorded rate, as a camera
+//! [paced|unpaced [ARGS…]]]]` (ARGS go to `tacmesh run`, such as `--config FILE`). A
+//! `replay:` SPEC is played looped at maximum rate (`--unpaced --loop`), the recordings'
+//! throughput benchmark; with `paced` after it, at its recorded rate, as a camera
 //! would deliver it (frames the pipeline cannot take are dropped, as live). The daemon's last
 //! counter line (standard error) gives object births and removals.
 //!
@@ -26,9 +27,12 @@ fn main() {
     // A recording plays as fast as the pipeline takes it, unless `paced` follows the spec:
     // then at its recorded rate, as a live camera would deliver it.
     let paced = args.next().is_some_and(|a| a == "paced");
+    // Anything after goes to `tacmesh run` as it is (`--config FILE` to compare settings).
+    let passed: Vec<String> = args.collect();
     let replay = sensor.starts_with("replay:");
     let duration = seconds.to_string();
     let mut extra = vec!["--duration-s", duration.as_str()];
+    extra.extend(passed.iter().map(String::as_str));
     if replay {
         extra.push("--loop");
         if !paced {

@@ -61,6 +61,22 @@ pub struct SupportPlane {
 }
 
 impl SupportPlane {
+    /// The same plane in a world moved by `new_from_old` (the tracker's correction of a camera
+    /// pose that was off): normal, offset and outline move with it.
+    pub fn moved(&self, new_from_old: &glam::Affine3A) -> Self {
+        let normal = new_from_old.transform_vector3(self.normal);
+        Self {
+            normal,
+            offset_m: self.offset_m + normal.dot(new_from_old.translation.into()),
+            outline: self
+                .outline
+                .iter()
+                .map(|&p| new_from_old.transform_point3(p))
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// Signed distance of `p` from the plane in metres, positive on the viewpoint side.
     pub fn signed_distance_m(&self, p: Vec3) -> f32 {
         self.normal.dot(p) - self.offset_m

@@ -186,6 +186,10 @@ pub struct TrackSection {
     pub leave_after_s: f32,
     /// Least time between two meshings of one object, seconds. Default 0.25.
     pub remesh_interval_s: f32,
+    /// Estimate the camera's own motion or pose error from the objects standing still, and
+    /// correct each frame by it (`tacmesh_track::camera_error`). Default true; a camera bolted
+    /// in place, with a good extrinsic calibration, can turn it off.
+    pub correct_camera: bool,
 }
 
 impl Default for TrackSection {
@@ -194,6 +198,7 @@ impl Default for TrackSection {
             voxel_size_m: 0.005,
             leave_after_s: 1.0,
             remesh_interval_s: 0.25,
+            correct_camera: true,
         }
     }
 }

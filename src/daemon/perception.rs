@@ -27,6 +27,7 @@ pub fn track_config(config: &DaemonConfig) -> TrackConfig {
         voxel_size_m: config.track.voxel_size_m,
         leave_after: config.leave_after(),
         remesh_interval: config.remesh_interval(),
+        estimate_camera_error: config.track.correct_camera,
         ..TrackConfig::default()
     }
 }
@@ -334,9 +335,6 @@ impl Fusing {
             clusters,
             supports,
         } = frame;
-        let plane_update = self.planes.update(&supports);
-        self.supports_last_frame = supports.len();
-
         let started = Instant::now();
         let report = self.objects.integrate(&FrameClusters {
             capture_time,
@@ -349,6 +347,18 @@ impl Fusing {
         });
         counters.record(Stage::Integrate, started.elapsed());
         Counters::add(&counters.frames_processed, 1);
+        // The supports in the map's world, as the objects are (the tracker corrected the frame
+        // for the camera's error).
+        let supports: Vec<SupportPlane> = if report.camera_correction == glam::Affine3A::IDENTITY {
+            supports
+        } else {
+            supports
+                .iter()
+                .map(|s| s.moved(&report.camera_correction))
+                .collect()
+        };
+        let plane_update = self.planes.update(&supports);
+        self.supports_last_frame = supports.len();
 
         {
             let mut board = crate::lock(&shared.board);

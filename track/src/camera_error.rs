@@ -27,7 +27,8 @@
 //!    the agreeing ones alone.
 //! 3. If no guess stands, a guess from the clusters' and objects' centroids: RANSAC over
 //!    triples of (cluster, object) pairs whose mutual distances agree (a rigid motion keeps
-//!    them), each triple giving a motion in closed form; the motion that brings most
+//!    them; the triples are grown from seed pairs through such pairs only), each triple giving
+//!    a motion in closed form; the motion that brings most
 //!    centroids onto their objects' is tried as in step 2. This reaches a camera that moved
 //!    far beyond the match distance (15° at 2 m is half a metre).
 //! 4. A dead band as for objects: a correction that differs from the last by less than half
@@ -74,8 +75,9 @@ const RANSAC_REACH_M: f32 = 0.6;
 /// A cluster's centroid within this of its object's (partial views move centroids by a few
 /// centimetres) is an inlier; also the slack on the mutual distances of a triple, metres.
 const RANSAC_INLIER_M: f32 = 0.04;
-/// Triples tried.
-const RANSAC_TRIES: usize = 400;
+/// Seed pairs tried (an even stride through all pairs), and triples tried per seed.
+const RANSAC_SEEDS: usize = 64;
+const RANSAC_TRIPLES_PER_SEED: usize = 16;
 /// Fewest inliers for a RANSAC motion to be tried.
 const RANSAC_MIN_INLIERS: usize = 3;
 
@@ -147,6 +149,9 @@ impl CameraError {
         // A guess that already lands every cluster on its model stands as it is: refined anew
         // each frame, the correction would carry the joint alignment's noise (two objects,
         // one a sphere, turned it by up to a degree from frame to frame) into every object.
+        for t in &trials {
+            tracing::trace!(pairs = t.pairs.len(), shares = ?t.shares, "camera correction: a guess as it is");
+        }
         let mut standing = trials.iter().find_map(|t| t.standing_as_is(&centroids));
         if standing.is_none() {
             trials.sort_by(|a, b| b.mean_share().total_cmp(&a.mean_share()));
@@ -155,7 +160,12 @@ impl CameraError {
                 .find_map(|trial| trial.refine(&centroids, config));
         }
         if standing.is_none() {
-            standing = centroid_ransac(self.correction, clusters, &centroids)
+            let ransac = centroid_ransac(self.correction, clusters, &centroids);
+            tracing::trace!(
+                found = ransac.is_some(),
+                "camera correction: RANSAC on centroids"
+            );
+            standing = ransac
                 .and_then(|guess| Trial::new(guess, now, clusters, &objects, &centroids, config))
                 .and_then(|trial| {
                     trial
@@ -164,8 +174,10 @@ impl CameraError {
                 });
         }
         let Some(standing) = standing else {
+            tracing::trace!("camera correction: no guess stands; the last one is kept");
             return self.correction;
         };
+        tracing::trace!(agreeing = standing.agreeing, "camera correction stands");
         if !close(
             &standing.correction,
             &self.correction,
@@ -313,6 +325,7 @@ impl<'a> Trial<'a> {
             .into_iter()
             .filter_map(|start| align_jointly(&self.parts, start, &settings).ok())
             .max_by(|a, b| total(a).total_cmp(&total(b)))?;
+        tracing::trace!(shares = ?joint.shares, "camera correction: refined");
         let agreeing: Vec<usize> = (0..self.parts.len())
             .filter(|&i| joint.shares[i] >= AGREE_SHARE)
             .collect();
@@ -371,43 +384,44 @@ fn centroid_ransac(
     if pairs.len() < RANSAC_MIN_INLIERS {
         return None;
     }
-    // xorshift64: a fixed sequence, so runs repeat.
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = |n: usize| {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state % n as u64) as usize
+    // Guided rather than blind sampling: a triple is right only if all three pairs are, and
+    // with ten objects in reach of each cluster a blind draw is right once in a thousand. Each
+    // seed pair keeps only the pairs whose distance to it the motion would keep (and no
+    // cluster or object twice); the triple's other two are drawn from those and checked
+    // against each other.
+    let consistent = |p: (usize, usize), q: (usize, usize)| {
+        p.0 != q.0
+            && p.1 != q.1
+            && (from[p.0].distance(from[q.0]) - centroids[p.1].distance(centroids[q.1])).abs()
+                <= RANSAC_INLIER_M
     };
     let mut best: Option<(usize, Affine3A)> = None;
-    for _ in 0..RANSAC_TRIES {
-        let triple = [
-            pairs[next(pairs.len())],
-            pairs[next(pairs.len())],
-            pairs[next(pairs.len())],
-        ];
-        let distinct = triple[0].0 != triple[1].0
-            && triple[0].0 != triple[2].0
-            && triple[1].0 != triple[2].0
-            && triple[0].1 != triple[1].1
-            && triple[0].1 != triple[2].1
-            && triple[1].1 != triple[2].1;
-        if !distinct {
-            continue;
-        }
-        let a = triple.map(|(ci, _)| from[ci]);
-        let b = triple.map(|(_, oi)| centroids[oi]);
-        let rigid = (0..3).all(|i| {
-            let j = (i + 1) % 3;
-            (a[i].distance(a[j]) - b[i].distance(b[j])).abs() <= RANSAC_INLIER_M
-        });
-        if !rigid {
-            continue;
-        }
-        let Some(motion) = triad(a, b) else { continue };
-        let inliers = count_inliers(&motion, &from, centroids);
-        if inliers >= RANSAC_MIN_INLIERS && best.is_none_or(|(n, _)| inliers > n) {
-            best = Some((inliers, motion));
+    let seed_stride = pairs.len().div_ceil(RANSAC_SEEDS).max(1);
+    for &seed in pairs.iter().step_by(seed_stride) {
+        let around: Vec<(usize, usize)> = pairs
+            .iter()
+            .copied()
+            .filter(|&q| consistent(seed, q))
+            .collect();
+        let mut tried = 0;
+        'seed: for (i, &second) in around.iter().enumerate() {
+            for &third in &around[i + 1..] {
+                if !consistent(second, third) {
+                    continue;
+                }
+                tried += 1;
+                if tried > RANSAC_TRIPLES_PER_SEED {
+                    break 'seed;
+                }
+                let triple = [seed, second, third];
+                let a = triple.map(|(ci, _)| from[ci]);
+                let b = triple.map(|(_, oi)| centroids[oi]);
+                let Some(motion) = triad(a, b) else { continue };
+                let inliers = count_inliers(&motion, &from, centroids);
+                if inliers >= RANSAC_MIN_INLIERS && best.is_none_or(|(n, _)| inliers > n) {
+                    best = Some((inliers, motion));
+                }
+            }
         }
     }
     best.map(|(_, motion)| motion * start)

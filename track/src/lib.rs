@@ -14,8 +14,9 @@
 //! - [`ObjectMap::objects`]: an [`ObjectSummary`] per object.
 //!
 //! Modules, in the order a frame runs through them: [`camera_error`] (one correction of the
-//! frame from the still objects, for a camera whose pose is off), [`associate`] (greedy nearest centroids),
-//! [`icp`] (point-to-plane alignment to the fused moments, with [`solve6`]), [`object`]
+//! frame from the objects standing still, for a camera whose pose is off or missing),
+//! [`associate`] (greedy nearest centroids), [`icp`] (point-to-plane alignment to the fused
+//! moments, with [`solve6`]), [`object`]
 //! (pose dead band, fusion with a weight cap), [`free_space`] (what the frame saw through,
 //! which the objects forget), [`change`] (the dirty measure), [`object_map`] (the whole).
 
