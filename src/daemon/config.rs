@@ -577,6 +577,7 @@ const KEY_WANTS: &[(&str, &str)] = &[
         "track.remesh_interval_s",
         "a time in seconds, for example 0.25",
     ),
+    ("track.correct_camera", "true or false"),
     (
         "mesh.max_residual_m",
         "a length in metres, for example 0.004",

@@ -260,7 +260,6 @@ fn what_a_support_hides_of_an_object_standing_on_it_is_forgotten() {
 #[test]
 fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each() {
     use glam::Quat;
-    let mut rng = rng(7);
     let places = [
         at(-0.15, 0.0, 1.0),
         at(0.15, 0.05, 1.1),
@@ -271,18 +270,56 @@ fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each
         Body::Sphere { radius_m: 0.06 },
         Body::Cube { half_m: 0.04 },
     ];
-    // View A at the origin; view B 0.3 m to the right and 0.1 m forward, turned 15° towards
-    // the objects. B's reported pose is 4 cm and 1.1° off its true one, so its points are
-    // deprojected (and its free space projected) through the wrong pose.
-    let true_b = Affine3A::from_rotation_translation(
-        Quat::from_rotation_y(-15f32.to_radians()),
-        Vec3::new(0.3, 0.0, 0.1),
-    );
+    // B's reported pose is 4 cm and 1.1° off its true one, so its points are deprojected (and
+    // its free space projected) through the wrong pose.
     let error = Affine3A::from_rotation_translation(
-        Quat::from_rotation_x(1.1f32.to_radians()),
+        glam::Quat::from_rotation_x(1.1f32.to_radians()),
         Vec3::new(0.03, -0.02, 0.02),
     );
-    let reported_b = true_b * error;
+    two_views(&places, &bodies, view_b() * error, 7);
+}
+
+/// A camera with no poses at all that jumps between the same two views every frame (the TUM
+/// desk's two frames, looped): B's frames come as if taken from A, every object 15° and up to
+/// 30 cm off where A put it, far beyond the match distance. The camera's motion is found from
+/// the objects' centroids (RANSAC), and each object is still one object fed by both views.
+#[test]
+fn a_camera_jumping_between_two_unposed_views_fuses_both_into_one_object_each() {
+    use glam::Quat;
+    let places = [
+        at(-0.25, 0.0, 1.0),
+        at(0.15, 0.05, 1.1),
+        posed(Quat::from_rotation_y(0.4), Vec3::new(0.0, -0.1, 1.25)),
+        posed(Quat::from_rotation_x(0.3), Vec3::new(0.3, -0.15, 1.4)),
+        at(-0.1, 0.15, 1.5),
+    ];
+    let bodies = [
+        CUBE,
+        Body::Sphere { radius_m: 0.06 },
+        Body::Cube { half_m: 0.04 },
+        Body::Cube { half_m: 0.06 },
+        Body::Sphere { radius_m: 0.05 },
+    ];
+    two_views(&places, &bodies, Affine3A::IDENTITY, 11);
+}
+
+/// View B: 0.3 m to the right of A (at the origin) and 0.1 m forward, turned 15° towards the
+/// objects.
+fn view_b() -> Affine3A {
+    Affine3A::from_rotation_translation(
+        glam::Quat::from_rotation_y(-15f32.to_radians()),
+        Vec3::new(0.3, 0.0, 0.1),
+    )
+}
+
+/// Bodies at places seen alternately from A and from B (40 frames), B's frames deprojected
+/// through `reported_b` instead of B's true pose: the map must correct every frame onto the
+/// map to within a few millimetres where the objects stand, remove nothing, give birth to
+/// nothing after the first frames, and send both views' clusters to the same objects, one per
+/// body.
+fn two_views(places: &[Affine3A], bodies: &[Body], reported_b: Affine3A, seed: u64) {
+    let mut rng = rng(seed);
+    let true_b = view_b();
     let seen_as_reported_b = reported_b * true_b.inverse();
     let mut map = patient_map();
     let mut ids_per_view: [std::collections::BTreeSet<u64>; 2] = Default::default();
@@ -298,7 +335,7 @@ fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each
         let viewpoint = Vec3::from(world_from_sensor.translation);
         let mut clusters: Vec<Vec<Vec3>> = bodies
             .iter()
-            .zip(&places)
+            .zip(places)
             .map(|(&body, &place)| view(body, place, true_viewpoint, 3000, 0.002, &mut rng))
             .collect();
         let mut background = wall(1.6);
@@ -322,7 +359,11 @@ fn a_moving_camera_with_poses_a_little_off_fuses_both_views_into_one_object_each
         } else {
             Affine3A::IDENTITY
         };
-        let middle = Vec3::new(0.0, 0.0, 1.1);
+        let middle = places
+            .iter()
+            .map(|p| Vec3::from(p.translation))
+            .sum::<Vec3>()
+            / places.len() as f32;
         let off_m = report
             .camera_correction
             .transform_point3(middle)
