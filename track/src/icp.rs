@@ -417,6 +417,11 @@ pub fn align_to_grids(
     })
 }
 
+/// [`align_jointly`] runs this many times each level's iterations: it starts farther from
+/// the answer than an object's own alignment (a camera's error of centimetres, or a motion
+/// guessed from centroids), and stops early once the steps are small.
+const JOINT_ITERATIONS_FACTOR: u32 = 3;
+
 /// One object's share of a joint alignment: its grids (coarse to fine, as in
 /// [`align_to_grids`]), where it stands, and a sample of this frame's points of it (world).
 pub struct JointPart<'a> {
@@ -466,7 +471,7 @@ pub fn align_jointly(
     let mut moved = [0.0f64; 6];
     let rounds = parts
         .first()
-        .map_or([0, 0], |p| p.levels.map(|l| l.iterations * 3));
+        .map_or([0, 0], |p| p.levels.map(|l| l.iterations * JOINT_ITERATIONS_FACTOR));
     for (level, &iterations) in rounds.iter().enumerate() {
         for _ in 0..iterations {
             let mut eq = NormalEquations::default();
