@@ -469,9 +469,9 @@ pub fn align_jointly(
         parts.iter().map(|_| Default::default()).collect();
     let mut corrected_from_world = guess;
     let mut moved = [0.0f64; 6];
-    let rounds = parts
-        .first()
-        .map_or([0, 0], |p| p.levels.map(|l| l.iterations * JOINT_ITERATIONS_FACTOR));
+    let rounds = parts.first().map_or([0, 0], |p| {
+        p.levels.map(|l| l.iterations * JOINT_ITERATIONS_FACTOR)
+    });
     for (level, &iterations) in rounds.iter().enumerate() {
         for _ in 0..iterations {
             let mut eq = NormalEquations::default();
