@@ -149,6 +149,11 @@ pub struct TrackedObject {
     bounds_in_object: (Vec3, Vec3),
     /// Alignment failures since the last success (a burst of resets is logged once).
     pub resets_in_a_row: u32,
+    /// Poses the object recently moved away from, with when it left each (see
+    /// [`ROCK_HOLD`]).
+    left_poses: Vec<(Affine3A, Duration)>,
+    /// When an alignment last put the object where it is (within the dead band).
+    pose_confirmed: Duration,
     /// The fused weight when a frame last saw the object (measured when carving touched it;
     /// see `ObjectMap::integrate`): carving that takes most of it from an object no cluster
     /// matches any more means the object is gone.
@@ -162,6 +167,15 @@ struct Judged {
     turn_rad: f32,
 }
 
+/// How far `after` is from `before` (both `world_from_object`): the shift of the object's
+/// origin and the turn, in the object's frame.
+fn pose_change(before: &Affine3A, after: &Affine3A) -> (f32, f32) {
+    let delta = before.inverse() * *after;
+    let shift_m = Vec3::from(delta.translation).length();
+    let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
+    (shift_m, turn_rad)
+}
+
 /// An object that has not moved for [`STILL_BEFORE_JUMP`] and whose next alignment moves it
 /// by more than [`JUMP_M`] or [`JUMP_RAD`] with fewer than [`FAMILIAR_FRACTION`] of the
 /// cluster's points on its surface is taken to be another object standing where it stood
@@ -172,6 +186,21 @@ struct Judged {
 const STILL_BEFORE_JUMP: Duration = Duration::from_millis(500);
 const JUMP_M: f32 = 0.005;
 const JUMP_RAD: f32 = 0.05; // about 3 degrees
+
+/// An object that rocks: a move back to a pose the object left less than [`ROCK_MEMORY`] ago
+/// waits until no alignment has put it where it is for [`ROCK_HOLD`]. Two views of an object
+/// from either side of a turn (a camera going back and forth, or shaking) each align it a few
+/// millimetres and degrees differently (the fused model holds both, each view's points having
+/// been fused where its frame put the object, and each view keeps finding its own): on the TUM
+/// desk's two views, a third of the objects moved in every frame, 2–10 mm and 1.5–7.5° each
+/// way. A held frame is not fused (the view the object is held at builds the model), and the
+/// left pose it matched is remembered afresh. A move to a new pose is never held (steady motion
+/// moves on at once), and an object really put back where it was follows [`ROCK_HOLD`] after
+/// the pose it was held at was last confirmed.
+const ROCK_HOLD: Duration = Duration::from_millis(200);
+const ROCK_MEMORY: Duration = Duration::from_secs(1);
+/// At most this many left poses are remembered.
+const ROCK_POSES: usize = 4;
 
 /// An alignment that puts more than this share of the fused surface where the camera sees
 /// through is refused (see [`TrackedObject::observe`]). A right alignment has a few per cent
@@ -212,6 +241,8 @@ impl TrackedObject {
             last_meshed: None,
             bounds_in_object: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             resets_in_a_row: 0,
+            left_poses: Vec::new(),
+            pose_confirmed: capture_time,
             weight_when_seen: points_in_world.len() as f64,
         };
         let range_m = centroid_in_world.distance(viewpoint_in_world);
@@ -295,7 +326,33 @@ impl TrackedObject {
                     );
                 }
                 self.resets_in_a_row = 0;
-                if shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad {
+                let beyond_band = |shift_m: f32, turn_rad: f32| {
+                    shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad
+                };
+                self.left_poses
+                    .retain(|&(_, left)| capture_time.saturating_sub(left) <= ROCK_MEMORY);
+                let rocking_back = beyond_band(shift_m, turn_rad)
+                    && capture_time.saturating_sub(self.pose_confirmed) < ROCK_HOLD
+                    && self.left_poses.iter().any(|(pose, _)| {
+                        let (shift_m, turn_rad) = pose_change(pose, &estimate);
+                        !beyond_band(shift_m, turn_rad)
+                    });
+                if rocking_back {
+                    // Not fused either: fused at the held pose, the cluster would put a copy
+                    // of the object where it is held, and confirm the hold for ever.
+                    tracing::trace!(id = self.id, shift_m, turn_rad, "object rocks back: held");
+                    for (pose, left) in &mut self.left_poses {
+                        let (shift_m, turn_rad) = pose_change(pose, &estimate);
+                        if !beyond_band(shift_m, turn_rad) {
+                            *left = capture_time;
+                        }
+                    }
+                    self.velocity = BodyVelocity::default();
+                    self.measured_velocity = BodyVelocity::default();
+                    self.last_seen = capture_time;
+                    self.frames_seen = self.frames_seen.saturating_add(1);
+                    return Observed::Still;
+                } else if beyond_band(shift_m, turn_rad) {
                     let dt = capture_time.saturating_sub(self.last_pose_change);
                     // Only a steady motion is carried on: a shaken camera moves every object
                     // back and forth, and carrying each jolt into the next frame's prediction
@@ -308,14 +365,19 @@ impl TrackedObject {
                         BodyVelocity::default()
                     };
                     self.measured_velocity = measured;
+                    self.left_poses
+                        .insert(0, (self.world_from_object, capture_time));
+                    self.left_poses.truncate(ROCK_POSES);
                     self.set_pose(estimate);
                     self.last_pose_change = capture_time;
+                    self.pose_confirmed = capture_time;
                     debug!(id = self.id, shift_m, turn_rad, "object moved");
                     Observed::Moved(estimate)
                 } else {
                     // Below the dead band: keep the pose and predict no motion, so noise
                     // never accumulates into drift while slow motion still adds up against
                     // the kept pose until it crosses a threshold.
+                    self.pose_confirmed = capture_time;
                     self.velocity = BodyVelocity::default();
                     self.measured_velocity = BodyVelocity::default();
                     Observed::Still
@@ -352,9 +414,7 @@ impl TrackedObject {
         config: &TrackConfig,
     ) -> Result<Judged, IcpFailure> {
         let estimate = object_from_world.inverse();
-        let delta = self.object_from_world * estimate;
-        let shift_m = Vec3::from(delta.translation).length();
-        let turn_rad = Quat::from_mat3a(&delta.matrix3).angle_between(Quat::IDENTITY);
+        let (shift_m, turn_rad) = pose_change(&self.world_from_object, &estimate);
         let still_for = capture_time.saturating_sub(self.last_pose_change);
         if still_for >= STILL_BEFORE_JUMP
             && (shift_m > JUMP_M || turn_rad > JUMP_RAD)
@@ -482,6 +542,8 @@ impl TrackedObject {
         self.points_fused = 0;
         self.bounds_in_object = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         self.last_pose_change = capture_time;
+        self.pose_confirmed = capture_time;
+        self.left_poses.clear();
         self.set_pose(Affine3A::from_rotation_translation(
             rotation,
             centroid_in_world,
