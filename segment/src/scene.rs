@@ -361,7 +361,14 @@ mod tests {
         };
         let edge = strip(0.805, 0.03);
         assert_eq!(
-            background_cluster(&edge, &all(&edge), &[table.clone()], &[], &band, &config),
+            background_cluster(
+                &edge,
+                &all(&edge),
+                std::slice::from_ref(&table),
+                &[],
+                &band,
+                &config
+            ),
             Some(NotAnObject::EdgeOfSupport)
         );
         let standing = strip(0.6, 0.2);
@@ -369,7 +376,7 @@ mod tests {
             background_cluster(
                 &standing,
                 &all(&standing),
-                &[table.clone()],
+                std::slice::from_ref(&table),
                 &[],
                 &band,
                 &config
