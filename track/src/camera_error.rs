@@ -16,8 +16,9 @@
 //! Each frame ([`CameraError::estimate`]):
 //! 1. Guesses: the last correction, then the other corrections of the last frames (a camera
 //!    that goes back and forth between viewpoints returns to an earlier one), then none. The
-//!    clusters, moved by each, are associated with the objects (where they are predicted) by
-//!    centroid; at least [`MIN_AGREEING`] must match.
+//!    clusters, moved by each, are associated with all the objects (where they are predicted;
+//!    one moving on its own is outvoted below) by centroid; at least [`MIN_AGREEING`] must
+//!    match.
 //! 2. A guess under which most matched clusters (more than half) already lie on their models
 //!    ([`FITS_SHARE`] of their points) stands as it is: the others moved on their own.
 //!    Otherwise, from the guess that fits best: all matched clusters are aligned to their
@@ -116,8 +117,8 @@ impl CameraError {
         self.correction
     }
 
-    /// Estimates this frame's correction from its clusters and the map's still objects (see
-    /// the module doc), keeps it for the next frame, and returns it.
+    /// Estimates this frame's correction from its clusters and the map's objects, where they
+    /// are predicted (see the module doc), keeps it for the next frame, and returns it.
     pub fn estimate(
         &mut self,
         clusters: &[Option<Cluster>],
@@ -146,9 +147,10 @@ impl CameraError {
             .into_iter()
             .filter_map(|guess| Trial::new(guess, now, clusters, &objects, &centroids, config))
             .collect();
-        // A guess that already lands every cluster on its model stands as it is: refined anew
-        // each frame, the correction would carry the joint alignment's noise (two objects,
-        // one a sphere, turned it by up to a degree from frame to frame) into every object.
+        // A guess that already lands most clusters on their models stands as it is: refined
+        // anew each frame, the correction would carry the joint alignment's noise (two
+        // objects, one a sphere, turned it by up to a degree from frame to frame) into every
+        // object.
         for t in &trials {
             tracing::trace!(pairs = t.pairs.len(), shares = ?t.shares, "camera correction: a guess as it is");
         }
