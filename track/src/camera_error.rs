@@ -112,11 +112,6 @@ struct Standing {
 }
 
 impl CameraError {
-    /// The correction in force: maps a frame's world onto the map's.
-    pub fn correction(&self) -> Affine3A {
-        self.correction
-    }
-
     /// Estimates this frame's correction from its clusters and the map's objects, where they
     /// are predicted (see the module doc), keeps it for the next frame, and returns it.
     pub fn estimate(
@@ -447,7 +442,8 @@ fn triad(a: [Vec3; 3], b: [Vec3; 3]) -> Option<Affine3A> {
     let frame = |t: [Vec3; 3]| -> Option<Mat3> {
         let x = (t[1] - t[0]).try_normalize()?;
         let z = x.cross(t[2] - t[0]);
-        // Thinner than 5 cm across a side of 10 cm: the normal is noise.
+        // |z| is the third corner's distance from the first side's line: under 5 mm (a
+        // centroid's noise) the normal is noise.
         if z.length() < 0.005 {
             return None;
         }

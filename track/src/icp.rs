@@ -164,16 +164,33 @@ struct NormalEquations {
 
 impl NormalEquations {
     fn add(&mut self, q: DVec3, plane_point: DVec3, normal: DVec3) {
-        let r = normal.dot(q - plane_point);
-        add_row(&mut self.h, &mut self.g, q, normal, r, 1.0);
+        self.add_inlier(q, normal, normal.dot(q - plane_point));
+    }
+
+    /// One inlier's row: residual `r` along `dir`, rotations acting through `lever` (the
+    /// point relative to the centre the step turns about).
+    fn add_inlier(&mut self, lever: DVec3, dir: DVec3, r: f64) {
+        add_row(&mut self.h, &mut self.g, lever, dir, r, 1.0);
         self.inliers += 1;
         self.sum_r2 += r * r;
-        self.sum_q2 += q.length_squared();
+        self.sum_q2 += lever.length_squared();
     }
 
     fn rms_m(&self) -> f32 {
         (self.sum_r2 / self.inliers.max(1) as f64).sqrt() as f32
     }
+}
+
+/// The plane `level` offers a point at `q` (object frame), looked up once per voxel.
+fn cached_plane(
+    level: &IcpLevel,
+    cache: &mut FxHashMap<IVec3, Option<Plane>>,
+    q: Vec3,
+) -> Option<Plane> {
+    let cell = level.grid.cell_of(q);
+    *cache
+        .entry(cell)
+        .or_insert_with(|| plane_near(level.grid, cell))
 }
 
 /// Accumulates the inliers of `points` (world) under `object_from_world` against one level.
@@ -187,11 +204,9 @@ fn accumulate(
     let reject = f64::from(level.reject_m);
     for &p_in_world in points_in_world {
         let q = object_from_world.transform_point3(p_in_world);
-        let cell = level.grid.cell_of(q);
-        let plane = *cache
-            .entry(cell)
-            .or_insert_with(|| plane_near(level.grid, cell));
-        let Some(plane) = plane else { continue };
+        let Some(plane) = cached_plane(level, cache, q) else {
+            continue;
+        };
         let (q, normal, point) = (
             q.as_dvec3(),
             plane.normal.as_dvec3(),
@@ -556,20 +571,14 @@ fn accumulate_joint(
     for &p in &part.points_in_world {
         let corrected = corrected_from_world.transform_point3(p);
         let q = part.object_from_world.transform_point3(corrected);
-        let cell = level.grid.cell_of(q);
-        let plane = *cache
-            .entry(cell)
-            .or_insert_with(|| plane_near(level.grid, cell));
-        let Some(plane) = plane else { continue };
+        let Some(plane) = cached_plane(level, cache, q) else {
+            continue;
+        };
         let r = f64::from(plane.normal.dot(q - plane.point));
         if r.abs() > reject {
             continue;
         }
         let normal = world_from_object.transform_vector3(plane.normal).as_dvec3();
-        let lever = corrected.as_dvec3() - centre;
-        add_row(&mut eq.h, &mut eq.g, lever, normal, r, 1.0);
-        eq.inliers += 1;
-        eq.sum_r2 += r * r;
-        eq.sum_q2 += lever.length_squared();
+        eq.add_inlier(corrected.as_dvec3() - centre, normal, r);
     }
 }

@@ -331,21 +331,22 @@ impl TrackedObject {
                 };
                 self.left_poses
                     .retain(|&(_, left)| capture_time.saturating_sub(left) <= ROCK_MEMORY);
+                // The left poses the estimate returns to (within the dead band).
+                let returned_to: Vec<usize> = (0..self.left_poses.len())
+                    .filter(|&k| {
+                        let (shift_m, turn_rad) = pose_change(&self.left_poses[k].0, &estimate);
+                        !beyond_band(shift_m, turn_rad)
+                    })
+                    .collect();
                 let rocking_back = beyond_band(shift_m, turn_rad)
                     && capture_time.saturating_sub(self.pose_confirmed) < ROCK_HOLD
-                    && self.left_poses.iter().any(|(pose, _)| {
-                        let (shift_m, turn_rad) = pose_change(pose, &estimate);
-                        !beyond_band(shift_m, turn_rad)
-                    });
+                    && !returned_to.is_empty();
                 if rocking_back {
                     // Not fused either: fused at the held pose, the cluster would put a copy
                     // of the object where it is held, and confirm the hold for ever.
                     tracing::trace!(id = self.id, shift_m, turn_rad, "object rocks back: held");
-                    for (pose, left) in &mut self.left_poses {
-                        let (shift_m, turn_rad) = pose_change(pose, &estimate);
-                        if !beyond_band(shift_m, turn_rad) {
-                            *left = capture_time;
-                        }
+                    for k in returned_to {
+                        self.left_poses[k].1 = capture_time;
                     }
                     self.velocity = BodyVelocity::default();
                     self.measured_velocity = BodyVelocity::default();
