@@ -14,6 +14,15 @@ const SIGMA_M: f32 = 0.001;
 const SPHERE: Body = Body::Sphere { radius_m: 0.06 };
 const CUBE: Body = Body::Cube { half_m: 0.05 };
 
+/// A cube's pose at `place` (the camera at the origin looking along +z), turned to show the
+/// camera three faces: a lone face leaves its slide and spin unobservable.
+fn showing_three_faces(place: Vec3) -> Affine3A {
+    posed(
+        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
+        place,
+    )
+}
+
 #[test]
 fn static_sphere_meshing_converges() {
     let mut rng = rng(1);
@@ -175,11 +184,7 @@ fn icp_recovers_small_translation_of_partial_sphere() {
 fn moving_objects_keep_ids_and_poses_follow() {
     let mut rng = rng(4);
     let mut map = map();
-    // Turned to show the camera three faces (a lone face leaves its spin unobservable).
-    let start_a = posed(
-        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
-        Vec3::new(-0.2, 0.0, 0.7),
-    );
+    let start_a = showing_three_faces(Vec3::new(-0.2, 0.0, 0.7));
     let start_b = at(0.2, 0.0, 0.7);
     let mut first_pose = [Affine3A::IDENTITY; 2];
     let mut moves = 0;
@@ -323,11 +328,7 @@ fn a_different_shape_in_place_resets_the_object() {
 fn moved_object_is_not_remeshed() {
     let mut rng = rng(7);
     let mut map = map();
-    // Turned so that the camera sees three faces (one face alone would not show a spin).
-    let mut pose = posed(
-        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
-        Vec3::new(0.0, 0.0, 0.6),
-    );
+    let mut pose = showing_three_faces(Vec3::new(0.0, 0.0, 0.6));
     for i in 0..200 {
         map.integrate(&frame(
             i,
@@ -513,10 +514,7 @@ fn a_hand_moving_one_of_three_objects_does_not_move_the_camera() {
     let mut map = map();
     let sphere = at(-0.2, 0.0, 0.8);
     let small = posed(Quat::from_rotation_y(0.4), Vec3::new(0.2, 0.05, 0.9));
-    let start = posed(
-        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
-        Vec3::new(0.0, -0.1, 0.7),
-    );
+    let start = showing_three_faces(Vec3::new(0.0, -0.1, 0.7));
     let mut first_pose = Affine3A::IDENTITY;
     for i in 0..40u32 {
         // Still for ten frames, then the cube slides 1 cm a frame towards the camera's right.
@@ -569,10 +567,7 @@ fn a_hand_moving_one_of_three_objects_does_not_move_the_camera() {
 fn an_object_seen_alternately_a_little_differently_does_not_rock() {
     let mut rng = rng(12);
     let mut map = map();
-    let pose = posed(
-        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
-        Vec3::new(0.0, 0.0, 0.7),
-    );
+    let pose = showing_three_faces(Vec3::new(0.0, 0.0, 0.7));
     let other = posed(
         Quat::from_rotation_z(2f32.to_radians()),
         Vec3::new(0.005, 0.0, 0.0),
@@ -596,10 +591,7 @@ fn an_object_seen_alternately_a_little_differently_does_not_rock() {
 fn an_object_put_back_where_it_was_follows() {
     let mut rng = rng(13);
     let mut map = map();
-    let home = posed(
-        Quat::from_rotation_x(0.5) * Quat::from_rotation_y(0.6),
-        Vec3::new(0.0, 0.0, 0.7),
-    );
+    let home = showing_three_faces(Vec3::new(0.0, 0.0, 0.7));
     let away = at(0.02, 0.0, 0.0) * home;
     let mut first = Affine3A::IDENTITY;
     for i in 0..40u32 {
