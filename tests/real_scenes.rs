@@ -410,30 +410,32 @@ fn room_recordings_publish_objects_not_walls() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// The PCL Kinect grabber frames (three frames of a desk with a laptop and a box, about 1 cm of
-/// camera jitter between them) looped for 60 s at 30 fps: no object in view is removed, and
-/// each object on the desk (within 1 m of the camera: the laptop, the box and a small thing
-/// beside them) keeps its area within 10 % of its first converged mesh (the one published 10 s
+/// The PCL Kinect grabber frames (three frames of a floor with a laptop and a box, about 1 cm
+/// of camera jitter between them) looped for 60 s at 30 fps: no object in view is removed, and
+/// each object keeps its area within 10 % of its first converged mesh (the one published 10 s
 /// in), with under 5 % of its area farther than 3 cm from the measured points. Before the
 /// weight cap and free-space carving the laptop grew from 0.11 to 0.20–0.27 m² with 27–45 % of
 /// its area off the data.
 ///
-/// Still open (issue 11): the clutter 1.2–1.7 m away at the back of the desk, seen in part
-/// and differently in each frame, is aligned badly: its poses jump by 2–9 cm from one update
-/// to the next (also with the fixed 5 mm voxels of before), so up to half of such an object's
-/// area lies off the data, and now and then one is removed while in view and born again (two
-/// of five runs on 2026-12-02). Those objects are printed, not held to the bounds.
+/// Not held to the area bound: an object under 12 fused voxels across (at its range), where a
+/// voxel more or less along the rim is more than 10 % of the area. The one such object is the
+/// chair's caster at the right edge (5–6 cm at 1 m, 0.002–0.003 m², shiny, seen differently in
+/// each frame; its pose still turns by a few degrees most frames): printed, not held.
+///
+/// Until moves had to be evident (`tacmesh_track::object`, `MOVE_EVIDENCE`), the clutter
+/// 1.2–1.7 m away at the back (a cardboard box, a cart, a blue bin, cut by the image's edges
+/// and seen differently in each frame) moved every other frame by 2–9 cm and degrees, was
+/// fused where each move put it, and ended with up to half its area off the data, now and
+/// then removed while in view and born again; those objects were printed, not held.
 ///
 /// The laptop lid, a flat face whose slide along itself alignment can barely see, crept with
 /// the camera shake in most runs of the third stop's first builds (0.12–0.18 m², up to 25 % of
 /// its area off the data): each jolt was carried into the next frame's prediction, and capture
 /// times off the wall clock made every run different. Since only a steady motion is predicted
 /// on (`tacmesh_track::object`) and what a support hides is forgotten, it holds 0.11–0.12 m²
-/// with nothing off the data (5 of 5 runs, two beside the whole suite), the box 0.066 m².
+/// with nothing off the data, the box 0.066 m².
 #[test]
 fn camera_jitter_neither_bloats_nor_drops_static_objects() {
-    /// Objects within this range (of their surface's mean) are held to the bounds.
-    const HELD_WITHIN_M: f32 = 1.0;
     const SECONDS: f64 = 60.0;
     const CONVERGED_AT_S: f64 = 10.0;
     let _one = ONE_DAEMON_AT_A_TIME
@@ -466,14 +468,17 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
     let mut subscription = daemon.subscribe();
     let started = Instant::now();
     let mut latest: BTreeMap<u64, TriMesh> = BTreeMap::new();
-    let mut converged: Option<BTreeMap<u64, (f32, f32)>> = None;
+    let mut converged: Option<BTreeMap<u64, (f32, f32, f32)>> = None;
     let mut removed = Vec::new();
     while started.elapsed() < Duration::from_secs_f64(SECONDS) {
         if converged.is_none() && started.elapsed() >= Duration::from_secs_f64(CONVERGED_AT_S) {
             converged = Some(
                 latest
                     .iter()
-                    .map(|(&id, m)| (id, (area_m2(m), mean_range_m(&surface_samples(m, 4000)))))
+                    .map(|(&id, m)| {
+                        let range_m = mean_range_m(&surface_samples(m, 4000));
+                        (id, (area_m2(m), range_m, size_m(m)))
+                    })
                     .collect(),
             );
         }
@@ -496,39 +501,35 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
     assert!(status.success(), "{status}");
     let converged = converged.expect("the run reached its converged time");
     assert!(!converged.is_empty(), "nothing was published:\n{log}");
+    let track = tacmesh::daemon::track_config(&tacmesh::daemon::DaemonConfig::default());
     let mut failures = Vec::new();
-    for (id, &(first, first_range_m)) in &converged {
+    for (id, &(first, first_range_m, first_size_m)) in &converged {
         let Some(mesh) = latest.get(id) else {
-            let what = format!("object {id} ({first:.3} m², {first_range_m:.2} m away)");
-            if first_range_m <= HELD_WITHIN_M {
-                failures.push(format!("{what} was removed while in view"));
-            } else {
-                eprintln!("{what} was removed while in view (not yet held)");
-            }
+            failures.push(format!(
+                "object {id} ({first:.3} m², {first_range_m:.2} m away) was removed while in view"
+            ));
             continue;
         };
         let area = area_m2(mesh);
         let samples = surface_samples(mesh, 4000);
         let range_m = mean_range_m(&samples);
-        let held = range_m <= HELD_WITHIN_M;
+        let voxels_across = first_size_m / track.voxel_at_range(first_range_m);
+        let area_held = voxels_across >= 12.0;
         let off = samples
             .iter()
             .filter(|&&p| near_data.distance(p) > 0.03)
             .count() as f32
             / samples.len().max(1) as f32;
         eprintln!(
-            "object {id} ({range_m:.2} m away{}): {first:.4} m² at {CONVERGED_AT_S} s, \
-             {area:.4} m² at {SECONDS} s ({:+.1} %), {:.1} % of its area over 3 cm from the \
-             data, {} faces",
-            if held { "" } else { ", not yet held" },
+            "object {id} ({range_m:.2} m away, {voxels_across:.0} voxels across): {first:.4} m² \
+             at {CONVERGED_AT_S} s, {area:.4} m² at {SECONDS} s ({:+.1} %{}), {:.1} % of its area \
+             over 3 cm from the data, {} faces",
             100.0 * (area / first - 1.0),
+            if area_held { "" } else { ", not held" },
             100.0 * off,
             mesh.triangles.len()
         );
-        if !held {
-            continue;
-        }
-        if (area / first - 1.0).abs() > 0.10 {
+        if area_held && (area / first - 1.0).abs() > 0.10 {
             failures.push(format!(
                 "object {id}: area {first:.4} -> {area:.4} m² ({:+.1} %)",
                 100.0 * (area / first - 1.0)

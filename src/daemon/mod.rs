@@ -37,6 +37,7 @@ use tacmesh_source::{DepthSource, SourceError};
 
 pub use config::{default_socket_path, ConfigError, DaemonConfig};
 pub use counters::CounterSnapshot;
+pub use perception::track_config;
 pub use sensor::{SensorError, SensorSpec};
 
 use crate::frame_ring::FrameRing;

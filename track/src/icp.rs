@@ -432,6 +432,30 @@ pub fn align_to_grids(
     })
 }
 
+/// How well `points_in_world` lie on one level's model under `object_from_world`: the sum
+/// of their squared point-to-plane distances, each capped at the level's rejection distance
+/// (a point with no plane, or farther, counts as that distance: a truncated least-squares
+/// cost, so that a pose is not rewarded for pushing points off the model).
+pub fn truncated_cost(
+    level: &IcpLevel,
+    points_in_world: &[Vec3],
+    object_from_world: &Affine3A,
+    scratch: &mut IcpScratch,
+) -> f64 {
+    let cache = scratch.cache_for(level.grid);
+    let cap = f64::from(level.reject_m).powi(2);
+    points_in_world
+        .iter()
+        .map(|&p| {
+            let q = object_from_world.transform_point3(p);
+            cached_plane(level, cache, q).map_or(cap, |plane| {
+                let r = f64::from(plane.normal.dot(q - plane.point));
+                (r * r).min(cap)
+            })
+        })
+        .sum()
+}
+
 /// [`align_jointly`] runs this many times each level's iterations: it starts farther from
 /// the answer than an object's own alignment (a camera's error of centimetres, or a motion
 /// guessed from centroids), and stops early once the steps are small.
