@@ -946,3 +946,57 @@ fn a_closed_log_stream_neither_stops_serving_nor_spoils_the_shutdown() {
     assert!(got.goodbye, "no Goodbye");
     assert!(!socket.exists(), "the socket file was left behind");
 }
+
+/// A subscriber that stalls for 20 s on the demo scene (the cone slides all the time) and then
+/// reads gets the current meshes after a few stale frames: what the daemon's small socket
+/// buffer held when it stalled (docs/protocol.md, "A client that reads slowly, or stops"). It
+/// is not dropped. Before the buffer was shrunk it read 56–59 frames of every version in order,
+/// 17–20 s old, before anything current.
+#[test]
+fn a_subscriber_back_from_a_20_s_stall_reads_current_meshes_after_a_few_stale_frames() {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut daemon = Run::start(&["--sensor", "sim:demo"], &dir.path().join("t.sock"));
+    let mut subscription = daemon.subscribe();
+    while !matches!(
+        subscription.next_message().expect("the snapshot"),
+        Message::SnapshotDone
+    ) {}
+    std::thread::sleep(Duration::from_secs(20));
+    let resumed = monotonic_now();
+    let reading = Instant::now();
+    // (object, version, capture time) of every Upsert in the first 2 s after the stall.
+    let mut read = Vec::new();
+    while reading.elapsed() < Duration::from_secs(2) {
+        if let Message::Upsert(u) = subscription.next_message().expect("the subscription") {
+            read.push((u.object_id, u.version, u.capture_time_ns));
+        }
+    }
+    // Stale: older than the stall's last 2 s, with a newer version of the same object read
+    // after it (a static object's latest mesh may be old and still current).
+    let old_before_ns = resumed.saturating_sub(Duration::from_secs(2)).as_nanos() as u64;
+    let stale = read
+        .iter()
+        .enumerate()
+        .filter(|&(k, &(id, version, capture_ns))| {
+            capture_ns < old_before_ns
+                && read[k + 1..]
+                    .iter()
+                    .any(|&(i, v, _)| i == id && v > version)
+        })
+        .count();
+    eprintln!(
+        "after a 20 s stall: {} upserts in 2 s, {stale} of them stale",
+        read.len()
+    );
+    assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
+    let log = daemon.log();
+    assert!(
+        !log.contains("dropping subscriber"),
+        "the stalled subscriber was dropped:\n{log}"
+    );
+    assert!(!read.is_empty(), "nothing was read after the stall");
+    assert!(stale <= 6, "{stale} stale upserts before the current ones");
+}

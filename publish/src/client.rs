@@ -67,7 +67,7 @@ pub(crate) struct Client {
     stream: UnixStream,
     pending: Mutex<Pending>,
     wake: Condvar,
-    /// Set with `goodbye` so that the writer stops a batch between frames.
+    /// Set with `goodbye`: a write error after it is the shutdown's, not the subscriber's.
     leaving: AtomicBool,
     threads: Mutex<Vec<JoinHandle<()>>>,
 }
@@ -149,8 +149,9 @@ pub(crate) fn start_threads(shared: &Arc<Shared>, client: &Arc<Client>) -> std::
     let reader = std::thread::Builder::new()
         .name(format!("publish-r{}", client.id))
         .spawn(move || {
-            let how = read_loop(&reader_client);
-            reader_shared.retire(&reader_client, how);
+            if let Some(how) = read_loop(&reader_client) {
+                reader_shared.retire(&reader_client, how);
+            }
         })?;
     lock(&client.threads).push(reader);
     Ok(())
@@ -158,7 +159,8 @@ pub(crate) fn start_threads(shared: &Arc<Shared>, client: &Arc<Client>) -> std::
 
 enum Next {
     Updates(Updates),
-    Goodbye(Arc<Vec<u8>>),
+    /// The Goodbye, and what was still pending when it came (flushed first).
+    Goodbye(Arc<Vec<u8>>, Updates),
     Closed,
 }
 
@@ -172,6 +174,16 @@ fn write_loop(shared: &Shared, client: &Client) -> Retire {
                 "it read nothing for {} s",
                 shared.write_timeout.as_secs_f32()
             ))
+        }
+        // A subscriber that closed its end: its reader saw the end of its input, and only a
+        // write tells a half-closed connection (still reading) from a closed one.
+        Err(error)
+            if matches!(
+                error.kind(),
+                ErrorKind::BrokenPipe | ErrorKind::ConnectionReset
+            ) =>
+        {
+            Retire::Gone("disconnected".into())
         }
         Err(error) => Retire::Gone(format!("write failed: {error}")),
     }
@@ -195,7 +207,7 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
                     break Next::Closed;
                 }
                 if let Some(goodbye) = pending.goodbye.take() {
-                    break Next::Goodbye(goodbye);
+                    break Next::Goodbye(goodbye, std::mem::take(&mut pending.updates));
                 }
                 // The first batch (the snapshot) is taken even when empty, for SnapshotDone.
                 if !snapshot_sent || !pending.updates.is_empty() {
@@ -207,69 +219,84 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
                     .unwrap_or_else(std::sync::PoisonError::into_inner);
             }
         };
-        let updates = match next {
+        match next {
             Next::Closed => return Ok(()),
-            Next::Goodbye(frame) => {
+            Next::Goodbye(frame, updates) => {
+                // What was queued before the Goodbye is sent first (bounded: each write by
+                // GOODBYE_WRITE_TIMEOUT, the whole by the publisher's grace, after which the
+                // socket is closed under the writer).
                 client
                     .stream
                     .set_write_timeout(Some(GOODBYE_WRITE_TIMEOUT))?;
+                send_updates(&send, shared, client, &updates, &mut snapshot_sent)?;
                 send(&frame)?;
                 let _ = client.stream.shutdown(Shutdown::Both);
                 return Ok(());
             }
-            Next::Updates(updates) => updates,
-        };
-        for (object_id, frame) in &updates.upserts {
-            if client.leaving.load(Ordering::Relaxed) {
-                break;
+            Next::Updates(updates) => {
+                send_updates(&send, shared, client, &updates, &mut snapshot_sent)?;
             }
-            send(&frame.bytes)?;
-            shared.meshes_published.fetch_add(1, Ordering::Relaxed);
-            tracing::trace!(
-                client = client.id,
-                object_id,
-                version = frame.version,
-                "sent mesh"
-            );
-        }
-        if client.leaving.load(Ordering::Relaxed) {
-            continue;
-        }
-        if !snapshot_sent {
-            send(&SNAPSHOT_DONE)?;
-            snapshot_sent = true;
-        }
-        let mut bytes = Vec::new();
-        for &object_id in &updates.removes {
-            bytes.clear();
-            encode(&Message::Remove { object_id }, &mut bytes)
-                .map_err(|error| std::io::Error::other(error.to_string()))?;
-            send(&bytes)?;
-        }
-        if let Some(stats) = &updates.stats {
-            send(stats)?;
         }
     }
 }
 
-/// Reads what the subscriber sends until it disconnects or misbehaves; returns how it ended.
-fn read_loop(client: &Client) -> Retire {
+/// Writes one batch: its Upserts, SnapshotDone after the first batch, its Removes and Stats.
+fn send_updates(
+    send: &impl Fn(&[u8]) -> std::io::Result<()>,
+    shared: &Shared,
+    client: &Client,
+    updates: &Updates,
+    snapshot_sent: &mut bool,
+) -> std::io::Result<()> {
+    for (object_id, frame) in &updates.upserts {
+        send(&frame.bytes)?;
+        shared.meshes_published.fetch_add(1, Ordering::Relaxed);
+        tracing::trace!(
+            client = client.id,
+            object_id,
+            version = frame.version,
+            "sent mesh"
+        );
+    }
+    if !*snapshot_sent {
+        send(&SNAPSHOT_DONE)?;
+        *snapshot_sent = true;
+    }
+    let mut bytes = Vec::new();
+    for &object_id in &updates.removes {
+        bytes.clear();
+        encode(&Message::Remove { object_id }, &mut bytes)
+            .map_err(|error| std::io::Error::other(error.to_string()))?;
+        send(&bytes)?;
+    }
+    if let Some(stats) = &updates.stats {
+        send(stats)?;
+    }
+    Ok(())
+}
+
+/// Reads what the subscriber sends until it disconnects or misbehaves; returns how it ended, or
+/// `None` when the subscriber only stopped sending (the end of its input at a frame boundary).
+fn read_loop(client: &Client) -> Option<Retire> {
     let mut decoder = FrameDecoder::new(Sender::Client);
     let mut buffer = [0u8; 4096];
     loop {
         let read = match (&client.stream).read(&mut buffer) {
-            Ok(0) if client.is_closed() => return Retire::Quiet,
+            Ok(0) if client.is_closed() => return Some(Retire::Quiet),
             Ok(0) if decoder.buffered_len() > 0 => {
-                return Retire::Gone(format!(
+                return Some(Retire::Gone(format!(
                     "disconnected in the middle of a frame ({} bytes unparsed)",
                     decoder.buffered_len()
-                ))
+                )))
             }
-            Ok(0) => return Retire::Gone("disconnected".into()),
+            // The subscriber sends nothing more: it may have closed only its sending side
+            // and still read (the server needs nothing from it). The writer finds out which
+            // at its next write; this thread just ends.
+            Ok(0) => return None,
             Ok(read) => read,
             Err(error) if error.kind() == ErrorKind::Interrupted => continue,
-            Err(_) if client.is_closed() => return Retire::Quiet,
-            Err(error) => return Retire::Gone(format!("read failed: {error}")),
+            Err(_) if client.is_closed() => return Some(Retire::Quiet),
+            Err(error) => return Some(Retire::Gone(format!("read failed: {error}"))),
         };
         decoder.push(&buffer[..read]);
         loop {
@@ -279,20 +306,22 @@ fn read_loop(client: &Client) -> Retire {
                 }
                 Ok(Some(other)) => {
                     // The decoder refuses server kinds already; this is for kinds added later.
-                    return Retire::Dropped(format!(
+                    return Some(Retire::Dropped(format!(
                         "it sent {}, which a subscriber may not send",
                         other.name()
-                    ));
+                    )));
                 }
                 Ok(None) => break,
-                Err(error) => return Retire::Dropped(format!("it sent a bad frame: {error}")),
+                Err(error) => {
+                    return Some(Retire::Dropped(format!("it sent a bad frame: {error}")))
+                }
             }
         }
         if decoder.buffered_len() > CLIENT_BUFFER_CAP {
-            return Retire::Dropped(format!(
+            return Some(Retire::Dropped(format!(
                 "it sent {} bytes without completing a frame; subscriber frames are a few bytes",
                 decoder.buffered_len()
-            ));
+            )));
         }
     }
 }

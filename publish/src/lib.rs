@@ -11,8 +11,10 @@
 //! Every subscriber gets `Hello`, an `Upsert` of every current object, `SnapshotDone`, then live
 //! updates. Each subscriber has its own writer thread and a pending state that holds at most the
 //! latest unsent mesh of each object, the unsent removes and the latest stats: a slow subscriber
-//! skips versions, and its memory stays bounded by the number of objects. A subscriber that reads
-//! nothing for [`WRITE_TIMEOUT`] is dropped. A reader thread per subscriber decodes what it sends;
+//! skips versions, and its memory stays bounded by the number of objects. Its socket's kernel
+//! buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can be stale there when it reads
+//! again. A subscriber that reads nothing for [`WRITE_TIMEOUT`] is dropped; one that only closes
+//! its sending side goes on being served. A reader thread per subscriber decodes what it sends;
 //! anything but a well-formed `Subscribe` gets it dropped with one WARN line. Blocking std
 //! threads only.
 
@@ -40,8 +42,18 @@ pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
 /// A subscriber whose socket accepts no bytes for this long is dropped. The timeout applies
 /// to each blocking write, and a write that made some progress before stalling returns that
 /// progress first, so a subscriber that stops reading is dropped between one and two
-/// timeouts after it stopped.
-pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+/// timeouts after it stopped. A stalled subscriber costs little meanwhile (the latest update
+/// of each object, and [`SEND_BUFFER_BYTES`] in the kernel), so it is given long enough to
+/// come back: a client paused 20 s in a debugger or a garbage collection resumes with current
+/// data.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// The kernel's send buffer asked for each subscriber's socket (`SO_SNDBUF`; Linux doubles it
+/// for its bookkeeping and grants at least 4.5 KiB, which holds 1–4 KiB of frames). What a subscriber that stops reading has not yet read is this buffer
+/// and the frame being written, then only the latest update of each object in the daemon's
+/// own queue: with the default buffer (131–154 kB queued) a client back from a 20 s stall read
+/// 56–59 frames of every version in order, 17–20 s old, before anything current.
+pub const SEND_BUFFER_BYTES: usize = 2 * 1024;
 
 /// How long [`Publisher::shutdown`] waits for subscribers to take their `Goodbye` before it
 /// closes their sockets anyway.
@@ -410,9 +422,10 @@ impl Publisher {
         }
     }
 
-    /// Says `Goodbye` with `reason` to every subscriber (waiting at most [`GOODBYE_GRACE`] for
-    /// them to take it), closes their connections, stops every thread and removes the socket
-    /// file. Unsent updates are discarded. Calling it again does nothing; dropping the publisher
+    /// Says `Goodbye` with `reason` to every subscriber after the updates queued for it
+    /// (waiting at most [`GOODBYE_GRACE`] for them to take both), closes their connections,
+    /// stops every thread and removes the socket file. A subscriber that has not taken them
+    /// within the grace is cut off. Calling it again does nothing; dropping the publisher
     /// calls it if it was not called.
     /// Takes `&self` so that a publisher shared between threads (in an `Arc`) can be shut down
     /// by whichever thread stops the daemon.
@@ -538,6 +551,11 @@ impl Shared {
         if let Some(why) = self.peer_refusal(&stream) {
             refuse(stream, &why);
             return;
+        }
+        if let Err(error) =
+            rustix::net::sockopt::set_socket_send_buffer_size(&stream, SEND_BUFFER_BYTES)
+        {
+            tracing::warn!("cannot shrink a new subscriber's send buffer: {error}");
         }
         if let Err(error) = stream.set_write_timeout(Some(self.write_timeout)) {
             tracing::warn!("cannot set up a new subscriber's socket: {error}");

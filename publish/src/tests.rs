@@ -544,3 +544,102 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     assert_eq!(receive.join().unwrap(), [1, 2]);
     assert_eq!(publisher.counters().clients_dropped, 1);
 }
+
+/// A client that closes its sending side (it has nothing to say: the server needs nothing from
+/// it) goes on receiving updates; one that closes both sides is let go as gone, not dropped.
+#[test]
+fn a_half_closed_client_keeps_receiving() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    client.snapshot();
+    client.stream.shutdown(std::net::Shutdown::Write).unwrap();
+    // Give the reader thread time to see the end of the client's input.
+    std::thread::sleep(Duration::from_millis(100));
+    publisher.upsert(upsert(1, 1, 10)).unwrap();
+    assert_eq!(client.upsert().object_id, 1);
+    assert_eq!(publisher.counters().clients_connected, 1);
+
+    drop(client);
+    // The writer finds the closed connection at its next write.
+    publisher.upsert(upsert(1, 2, 10)).unwrap();
+    wait_until("the closed client unregistered", || {
+        publisher.counters().clients_connected == 0
+    });
+    assert_eq!(publisher.counters().clients_dropped, 0);
+}
+
+/// Updates queued for a subscriber when the daemon stops are sent before the Goodbye.
+#[test]
+fn shutdown_sends_what_is_queued_before_goodbye() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    publisher.upsert(upsert(3, 1, 10)).unwrap();
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![(3, 1)]);
+    // A mesh far larger than the socket's buffer keeps the writer busy while the client does
+    // not read; the next updates wait in the queue behind it.
+    publisher.upsert(upsert(1, 1, 50_000)).unwrap();
+    std::thread::sleep(Duration::from_millis(200));
+    publisher.upsert(upsert(2, 1, 10)).unwrap();
+    publisher.upsert(upsert(1, 2, 10)).unwrap();
+    publisher.remove(3);
+    let stopping = std::thread::spawn(move || {
+        publisher.shutdown("SIGTERM received");
+        publisher
+    });
+    std::thread::sleep(Duration::from_millis(100));
+    let mut seen = Vec::new();
+    while let Some(message) = client.next() {
+        seen.push(match message {
+            Message::Upsert(u) => format!("upsert {}", u.object_id),
+            Message::Remove { object_id } => format!("remove {object_id}"),
+            Message::Goodbye { .. } => "goodbye".into(),
+            other => other.name().to_string(),
+        });
+    }
+    stopping.join().unwrap();
+    assert_eq!(
+        seen,
+        ["upsert 1", "upsert 1", "upsert 2", "remove 3", "goodbye"]
+    );
+}
+
+/// A client that reads nothing for a while and then reads again gets current data after at
+/// most a few stale frames: what the kernel's small send buffer ([`crate::SEND_BUFFER_BYTES`])
+/// and the frame being written hold. The daemon's own queue keeps only the latest update of
+/// each object.
+#[test]
+fn a_client_back_from_a_stall_reads_little_that_is_stale() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    client.snapshot();
+    // 300 versions of two objects (about 2.5 kB each) while the client does not read.
+    for version in 1..=300u64 {
+        publisher.upsert(upsert(1, version, 100)).unwrap();
+        publisher.upsert(upsert(2, version, 100)).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    let mut stale = 0;
+    let mut current = std::collections::BTreeSet::new();
+    while current.len() < 2 {
+        let u = client.upsert();
+        if u.version == 300 {
+            current.insert(u.object_id);
+        } else {
+            stale += 1;
+        }
+    }
+    eprintln!("{stale} stale frames before both objects' latest");
+    // With the default buffer (over 100 kB) this was about 50.
+    assert!(stale <= 6, "{stale} stale frames before the current ones");
+    assert_eq!(publisher.counters().clients_dropped, 0);
+}
