@@ -16,6 +16,9 @@ use crate::{lock, Shared};
 /// Write timeout for the Goodbye, so that shutdown is quick even for a stalled subscriber.
 const GOODBYE_WRITE_TIMEOUT: Duration = Duration::from_millis(500);
 
+/// The send buffer asked for when the daemon says Goodbye (see [`Client::say_goodbye`]).
+const SHUTDOWN_SEND_BUFFER_BYTES: usize = 4 * 1024 * 1024;
+
 /// A client has nothing legitimate to send that is longer than this (Subscribe is 5 bytes), so
 /// more unparsed bytes than this mean it is not speaking the protocol.
 const CLIENT_BUFFER_CAP: usize = 64 * 1024;
@@ -113,6 +116,15 @@ impl Client {
     }
 
     pub(crate) fn say_goodbye(&self, frame: &Arc<Vec<u8>>) {
+        // Freshness no longer matters: a socket buffer large enough for what is queued and the
+        // Goodbye lets a client that is not reading just now find both when it reads, after the
+        // daemon has gone (the kernel keeps what was written). With the small buffer such a
+        // client would be cut off at the end of the grace without its Goodbye. Raising it wakes
+        // a writer blocked on the small one; the kernel caps it at net.core.wmem_max.
+        let _ = rustix::net::sockopt::set_socket_send_buffer_size(
+            &self.stream,
+            SHUTDOWN_SEND_BUFFER_BYTES,
+        );
         lock(&self.pending).goodbye = Some(Arc::clone(frame));
         self.leaving.store(true, Ordering::Relaxed);
         self.wake.notify_one();

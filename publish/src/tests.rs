@@ -643,3 +643,35 @@ fn a_client_back_from_a_stall_reads_little_that_is_stale() {
     assert!(stale <= 6, "{stale} stale frames before the current ones");
     assert_eq!(publisher.counters().clients_dropped, 0);
 }
+
+/// A client that is not reading when the daemon stops still finds what was queued for it and
+/// the Goodbye when it reads, after the daemon is gone: at shutdown the small socket buffer
+/// is raised so that both fit in the kernel.
+#[test]
+fn a_client_not_reading_at_shutdown_still_gets_its_goodbye() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    client.snapshot();
+    // About 50 kB queued: ten times the small buffer.
+    for id in 1..=20 {
+        publisher.upsert(upsert(id, 1, 100)).unwrap();
+    }
+    publisher.shutdown("SIGTERM received");
+    let mut upserts = 0;
+    loop {
+        match client.next() {
+            Some(Message::Upsert(_)) => upserts += 1,
+            Some(Message::Goodbye { reason }) => {
+                assert_eq!(reason, "SIGTERM received");
+                break;
+            }
+            Some(other) => panic!("unexpected {other:?}"),
+            None => panic!("the connection ended without a Goodbye after {upserts} upserts"),
+        }
+    }
+    assert_eq!(upserts, 20);
+    assert_eq!(client.next(), None);
+}
