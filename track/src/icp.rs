@@ -67,6 +67,9 @@ pub struct Alignment {
     pub inliers: usize,
     /// RMS point-to-plane distance of the inliers, metres.
     pub rms_m: f32,
+    /// The last level's [`truncated_cost`] at the result, from the same pass that counted the
+    /// inliers.
+    pub truncated_cost: f64,
 }
 
 /// Why the cluster could not be aligned to the model (the tracker then resets the object).
@@ -425,10 +428,12 @@ pub fn align_to_grids(
             max_rms_m: settings.max_rms_m,
         });
     }
+    let outliers = (points_in_world.len() - eq.inliers) as f64;
     Ok(Alignment {
         object_from_world,
         inliers: eq.inliers,
         rms_m,
+        truncated_cost: eq.sum_r2 + outliers * f64::from(last.reject_m).powi(2),
     })
 }
 

@@ -34,7 +34,8 @@ use crate::change::ChangeTracker;
 use crate::config::TrackConfig;
 use crate::free_space::FreeSpace;
 use crate::icp::{
-    align_to_grids, truncated_cost, CentroidAnchor, IcpFailure, IcpLevel, IcpScratch, IcpSettings,
+    align_to_grids, truncated_cost, Alignment, CentroidAnchor, IcpFailure, IcpLevel, IcpScratch,
+    IcpSettings,
 };
 
 /// Fraction of a cluster's points that must find the fused surface for a fine-only alignment
@@ -162,11 +163,13 @@ pub struct TrackedObject {
     pub weight_when_seen: f64,
 }
 
-/// An accepted alignment: the new `world_from_object` and how far it is from the current pose.
+/// An accepted alignment: the new `world_from_object`, how far it is from the current pose,
+/// and the alignment it came from.
 struct Judged {
     estimate: Affine3A,
     shift_m: f32,
     turn_rad: f32,
+    fit: Alignment,
 }
 
 /// How far `after` is from `before` (both `world_from_object`): the shift of the object's
@@ -322,14 +325,16 @@ impl TrackedObject {
                 config,
                 scratch,
             )
-            .and_then(|(object_from_world, inlier_share)| {
-                self.judge_alignment(object_from_world, inlier_share, capture_time, free, config)
+            .and_then(|fit| {
+                let inlier_share = fit.inliers as f32 / sample.len().max(1) as f32;
+                self.judge_alignment(fit, inlier_share, capture_time, free, config)
             });
         let outcome = match aligned {
             Ok(Judged {
                 estimate,
                 shift_m,
                 turn_rad,
+                fit,
             }) => {
                 if self.resets_in_a_row > 1 {
                     info!(
@@ -344,20 +349,25 @@ impl TrackedObject {
                 };
                 self.left_poses
                     .retain(|&(_, left)| capture_time.saturating_sub(left) <= ROCK_MEMORY);
-                // The left poses the estimate returns to (within the dead band).
-                let returned_to: Vec<usize> = (0..self.left_poses.len())
-                    .filter(|&k| {
-                        let (shift_m, turn_rad) = pose_change(&self.left_poses[k].0, &estimate);
-                        !beyond_band(shift_m, turn_rad)
-                    })
-                    .collect();
                 // A move the cluster barely prefers is noise: the object stays where it is
                 // held (see `MOVE_EVIDENCE`).
                 let moves = beyond_band(shift_m, turn_rad)
-                    && self.move_is_evident(&sample, &estimate, config, scratch);
-                let rocking_back = moves
+                    && self.move_is_evident(&sample, &fit, config, scratch);
+                // A move back to left poses (within the dead band) while the held pose is
+                // still being confirmed: the left poses it returns to.
+                let returned_to: Vec<usize> = if moves
                     && capture_time.saturating_sub(self.pose_confirmed) < ROCK_HOLD
-                    && !returned_to.is_empty();
+                {
+                    (0..self.left_poses.len())
+                        .filter(|&k| {
+                            let (shift_m, turn_rad) = pose_change(&self.left_poses[k].0, &estimate);
+                            !beyond_band(shift_m, turn_rad)
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                let rocking_back = !returned_to.is_empty();
                 if rocking_back {
                     // Not fused either: fused at the held pose, the cluster would put a copy
                     // of the object where it is held, and confirm the hold for ever.
@@ -418,20 +428,20 @@ impl TrackedObject {
         outcome
     }
 
-    /// Accepts an alignment (`object_from_world`, with `inlier_share` of the cluster on the
-    /// fused surface) or refuses it: a still object that would jump with a cluster only partly
-    /// on it (see [`JUMP_M`]), or a pose that puts much of the fused surface where the camera
+    /// Accepts an alignment (`fit`, with `inlier_share` of the cluster on the fused surface)
+    /// or refuses it: a still object that would jump with a cluster only partly on it (see
+    /// [`JUMP_M`]), or a pose that puts much of the fused surface where the camera
     /// sees through (see [`SEEN_THROUGH_MAX`]). An accepted one comes with its motion from the
     /// current pose.
     fn judge_alignment(
         &self,
-        object_from_world: Affine3A,
+        fit: Alignment,
         inlier_share: f32,
         capture_time: Duration,
         free: Option<&FreeSpace>,
         config: &TrackConfig,
     ) -> Result<Judged, IcpFailure> {
-        let estimate = object_from_world.inverse();
+        let estimate = fit.object_from_world.inverse();
         let (shift_m, turn_rad) = pose_change(&self.world_from_object, &estimate);
         let still_for = capture_time.saturating_sub(self.last_pose_change);
         if still_for >= STILL_BEFORE_JUMP
@@ -456,6 +466,7 @@ impl TrackedObject {
             estimate,
             shift_m,
             turn_rad,
+            fit,
         })
     }
 
@@ -477,9 +488,8 @@ impl TrackedObject {
         noise_m: f32,
         config: &TrackConfig,
         scratch: &mut IcpScratch,
-    ) -> Result<(Affine3A, f32), IcpFailure> {
-        let share =
-            |a: &crate::icp::Alignment| a.inliers as f32 / points_in_world.len().max(1) as f32;
+    ) -> Result<Alignment, IcpFailure> {
+        let share = |a: &Alignment| a.inliers as f32 / points_in_world.len().max(1) as f32;
         let levels = self.icp_levels(config);
         let settings = IcpSettings {
             max_rms_m: config.icp_max_rms_m.max(1.5 * noise_m),
@@ -501,7 +511,7 @@ impl TrackedObject {
         );
         if let Ok(a) = fine_only {
             if share(&a) >= FAMILIAR_FRACTION {
-                return Ok((a.object_from_world, share(&a)));
+                return Ok(a);
             }
         }
         let offset = centroid_in_world - predicted.transform_point3(self.centroid_in_object);
@@ -509,10 +519,9 @@ impl TrackedObject {
         if offset.length() > levels[1].reject_m {
             starts.push((Affine3A::from_translation(offset) * predicted).inverse());
         }
-        let mut last = fine_only.map(|a| (a.object_from_world, share(&a)));
+        let mut last = fine_only;
         for start in starts {
-            last = align_to_grids(&levels, points_in_world, start, anchor, &settings, scratch)
-                .map(|a| (a.object_from_world, share(&a)));
+            last = align_to_grids(&levels, points_in_world, start, anchor, &settings, scratch);
             if last.is_ok() {
                 break;
             }
@@ -520,21 +529,19 @@ impl TrackedObject {
         last
     }
 
-    /// Whether the cluster (`sample`, world) fits the fused model at `estimate`
-    /// (`world_from_object`) so much better than where the object is held that the move is
-    /// more than noise: the truncated cost falls by more than [`MOVE_EVIDENCE`] residual
-    /// variances.
+    /// Whether the cluster (`sample`, world, the points `fit` aligned) fits the fused model at
+    /// the alignment's pose so much better than where the object is held that the move is more
+    /// than noise: the truncated cost falls by more than [`MOVE_EVIDENCE`] residual variances.
     fn move_is_evident(
         &self,
         sample: &[Vec3],
-        estimate: &Affine3A,
+        fit: &Alignment,
         config: &TrackConfig,
         scratch: &mut IcpScratch,
     ) -> bool {
         let levels = self.icp_levels(config);
-        let fine = &levels[1];
-        let held = truncated_cost(fine, sample, &self.object_from_world, scratch);
-        let moved = truncated_cost(fine, sample, &estimate.inverse(), scratch);
+        let held = truncated_cost(&levels[1], sample, &self.object_from_world, scratch);
+        let moved = fit.truncated_cost;
         let n = sample.len() as f64;
         // Per point, the residual variance left at the estimate (at least a tenth of a
         // voxel's, so an exact synthetic fit does not make every nudge evident).

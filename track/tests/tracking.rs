@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Quat, Vec3};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
-use tacmesh_track::icp::{align_to_grids, IcpLevel, IcpScratch, IcpSettings};
+use tacmesh_track::icp::{align_to_grids, truncated_cost, IcpLevel, IcpScratch, IcpSettings};
 use tacmesh_track::TrackConfig;
 use util::*;
 
@@ -157,6 +157,18 @@ fn check_alignment(body: Body, truth: Affine3A, check_rotation: bool) {
         aligned.inliers
     );
     assert!(shift_m < 0.001, "{shift_m} m");
+    // The cost the alignment reports is the last level's truncated cost at its result.
+    let cost = truncated_cost(
+        &levels[1],
+        &moved,
+        &aligned.object_from_world,
+        &mut IcpScratch::default(),
+    );
+    assert!(
+        (aligned.truncated_cost - cost).abs() <= 1e-6 * cost,
+        "{} against {cost}",
+        aligned.truncated_cost
+    );
     if check_rotation {
         assert!(turn_rad.to_degrees() < 0.5, "{}°", turn_rad.to_degrees());
     }
