@@ -124,6 +124,17 @@ impl TestClient {
     }
 }
 
+/// A publisher with nothing published yet on a socket in `dir`, and one client that has read
+/// its Hello and empty snapshot.
+fn serving_one_client(dir: &tempfile::TempDir) -> (PathBuf, Publisher, TestClient) {
+    let path = socket_in(dir);
+    let publisher = publisher(&path);
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![]);
+    (path, publisher, client)
+}
+
 fn wait_until(what: &str, mut condition: impl FnMut() -> bool) {
     let deadline = Instant::now() + WAIT;
     while !condition() {
@@ -238,11 +249,7 @@ fn stalled_client_does_not_delay_another() {
 #[test]
 fn garbage_client_is_dropped_while_another_keeps_receiving() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut good = TestClient::connect(&path);
-    good.hello();
-    good.snapshot();
+    let (path, publisher, mut good) = serving_one_client(&dir);
     let mut bad = TestClient::connect(&path);
     bad.hello();
     bad.snapshot();
@@ -275,11 +282,7 @@ fn oversize_and_wrong_direction_frames_drop_the_client() {
 #[test]
 fn newer_upsert_replaces_an_unsent_older_one() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut client = TestClient::connect(&path);
-    client.hello();
-    assert_eq!(client.snapshot(), vec![]);
+    let (_, publisher, mut client) = serving_one_client(&dir);
     // Object 1 is larger than the socket buffers, so the writer is stuck on it while the client
     // does not read; object 2 meanwhile gets three versions.
     publisher.upsert(upsert(1, 1, 200_000)).unwrap();
@@ -470,11 +473,7 @@ fn the_socket_file_gets_the_configured_group() {
 #[test]
 fn shutdown_sends_goodbye_and_removes_the_socket() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut client = TestClient::connect(&path);
-    client.hello();
-    client.snapshot();
+    let (path, publisher, mut client) = serving_one_client(&dir);
     let _stalled = UnixStream::connect(&path).unwrap();
     wait_until("both clients registered", || {
         publisher.counters().clients_connected == 2
@@ -550,11 +549,7 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
 #[test]
 fn a_half_closed_client_keeps_receiving() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut client = TestClient::connect(&path);
-    client.hello();
-    client.snapshot();
+    let (_, publisher, mut client) = serving_one_client(&dir);
     client.stream.shutdown(std::net::Shutdown::Write).unwrap();
     // Give the reader thread time to see the end of the client's input.
     std::thread::sleep(Duration::from_millis(100));
@@ -616,11 +611,7 @@ fn shutdown_sends_what_is_queued_before_goodbye() {
 #[test]
 fn a_client_back_from_a_stall_reads_little_that_is_stale() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut client = TestClient::connect(&path);
-    client.hello();
-    client.snapshot();
+    let (_, publisher, mut client) = serving_one_client(&dir);
     // 300 versions of two objects (about 2.5 kB each) while the client does not read.
     for version in 1..=300u64 {
         publisher.upsert(upsert(1, version, 100)).unwrap();
@@ -650,11 +641,7 @@ fn a_client_back_from_a_stall_reads_little_that_is_stale() {
 #[test]
 fn a_client_not_reading_at_shutdown_still_gets_its_goodbye() {
     let dir = tempfile::tempdir().unwrap();
-    let path = socket_in(&dir);
-    let publisher = publisher(&path);
-    let mut client = TestClient::connect(&path);
-    client.hello();
-    client.snapshot();
+    let (_, publisher, mut client) = serving_one_client(&dir);
     // About 50 kB queued: ten times the small buffer.
     for id in 1..=20 {
         publisher.upsert(upsert(id, 1, 100)).unwrap();
