@@ -9,14 +9,15 @@
 //! 30 fps, paced) for 60 s, subscribes over its socket, and reports: sustained frame rate,
 //! frames dropped, frame-to-publish latency p50/p99, per-stage p50/p99 (from the daemon's last
 //! Stats message), peak RSS (VmHWM from /proc), bytes per second on the socket, and what one
-//! subscriber saw (upserts, removes, data age at arrival). Prints a Markdown table for
-//! BENCHMARKS.md. Not a test: nothing here asserts a time.
+//! subscriber saw (shapes, poses, removes and their bytes, data age at arrival). With
+//! `BENCH_ENCODING=compact` in the environment the subscriber asks for compact shapes.
+//! Prints a Markdown table for BENCHMARKS.md. Not a test: nothing here asserts a time.
 
 mod support;
 
 use std::time::{Duration, Instant};
 
-use tacmesh::protocol::{Message, Stats};
+use tacmesh::protocol::{encode, Encoding, Message, Stats, Subscribe};
 use tacmesh::source::monotonic_now;
 use tacmesh::subscriber::Subscription;
 
@@ -46,8 +47,18 @@ fn main() {
     } = support::start_daemon(&sensor, &extra);
     let pid = daemon.id();
 
+    let encoding = match std::env::var("BENCH_ENCODING").as_deref() {
+        Ok("compact") => Encoding::Compact,
+        _ => Encoding::Full,
+    };
+    let options = (encoding == Encoding::Compact).then(|| Subscribe {
+        encoding,
+        resend: true,
+        ..Subscribe::default()
+    });
     let mut subscription =
-        Subscription::connect(&socket, Some(Duration::from_secs(5))).expect("subscribes");
+        Subscription::connect_with(&socket, Some(Duration::from_secs(5)), options)
+            .expect("subscribes");
 
     // RSS sampler: the daemon's peak resident set, from its own high-water mark.
     let rss = std::thread::spawn(move || {
@@ -61,27 +72,50 @@ fn main() {
 
     let mut last_stats: Option<(Instant, Stats)> = None;
     let mut first_stats: Option<(Instant, Stats)> = None;
-    let (mut upserts, mut removes) = (0u64, 0u64);
+    let (mut shapes, mut poses, mut removes) = (0u64, 0u64, 0u64);
+    // Bytes on the wire by kind (a frame's size is that of the message encoded again) and
+    // the faces of the shapes, for bytes per face.
+    let (mut shape_bytes, mut pose_bytes, mut other_bytes, mut faces) = (0u64, 0u64, 0u64, 0u64);
     let mut ages_ms: Vec<f64> = Vec::new();
-    // A moved object is republished with the same triangles and report; anything else is a
-    // new mesh. Their ages differ: a move is published by the frame path, a mesh by the mesher.
-    let mut last_report: std::collections::HashMap<u64, (usize, tacmesh::protocol::SimplifyStats)> =
-        std::collections::HashMap::new();
+    // Their ages differ: a move or a sighting (a Pose) is published by the frame path, a new
+    // shape by the mesher.
     let (mut moved_ages_ms, mut mesh_ages_ms): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    let age_ms = |capture_ns: u64| {
+        monotonic_now()
+            .as_nanos()
+            .saturating_sub(u128::from(capture_ns)) as f64
+            / 1e6
+    };
+    let mut frame = Vec::new();
     loop {
-        match subscription.next_message() {
-            Ok(Message::Upsert(upsert)) => {
-                upserts += 1;
-                let age = monotonic_now()
-                    .as_nanos()
-                    .saturating_sub(upsert.capture_time_ns as u128);
-                ages_ms.push(age as f64 / 1e6);
-                let key = (upsert.mesh.triangles.len(), upsert.report);
-                if last_report.insert(upsert.object_id, key) == Some(key) {
-                    moved_ages_ms.push(age as f64 / 1e6);
-                } else {
-                    mesh_ages_ms.push(age as f64 / 1e6);
-                }
+        let message = subscription.next_message();
+        if let Ok(message) = &message {
+            frame.clear();
+            let mut again = message.clone();
+            if let Message::Shape(shape) = &mut again {
+                // Encoding adds the quantisation bound again; the size is the same.
+                shape.encoding = encoding;
+            }
+            encode(&again, &mut frame).expect("a decoded message encodes");
+            match message {
+                Message::Shape(_) => shape_bytes += frame.len() as u64,
+                Message::Pose(_) => pose_bytes += frame.len() as u64,
+                _ => other_bytes += frame.len() as u64,
+            }
+        }
+        match message {
+            Ok(Message::Shape(shape)) => {
+                shapes += 1;
+                faces += shape.mesh.triangles.len() as u64;
+                let age = age_ms(shape.shape_time_ns);
+                ages_ms.push(age);
+                mesh_ages_ms.push(age);
+            }
+            Ok(Message::Pose(pose)) => {
+                poses += 1;
+                let age = age_ms(pose.last_seen_ns);
+                ages_ms.push(age);
+                moved_ages_ms.push(age);
             }
             Ok(Message::Remove { .. }) => removes += 1,
             Ok(Message::Stats(stats)) => {
@@ -118,7 +152,7 @@ fn main() {
     };
     let pct = |q: f64| pct_of(&ages_ms, q);
 
-    println!("\n## tacmesh run, {sensor}, {seconds:.0} s (exit {status})\n");
+    println!("\n## tacmesh run, {sensor}, {seconds:.0} s, {encoding:?} encoding (exit {status})\n");
     println!("| measure | value |\n|---|---|");
     println!("| frames from sensor | {} ({fps:.1} fps) |", s1.frames_in);
     println!("| frames processed | {:.1} fps |", processed_fps);
@@ -139,10 +173,24 @@ fn main() {
     }
     println!("| objects tracked at end | {} |", s1.objects_tracked);
     println!("| meshing runs | {} |", s1.meshing_runs);
-    println!("| meshes published | {} |", s1.meshes_published);
+    println!(
+        "| shapes / poses published | {} / {} |",
+        s1.shapes_published, s1.poses_published
+    );
     println!("| socket bytes / s (1 subscriber) | {:.0} |", bytes_per_s);
     println!("| peak RSS | {:.1} MiB |", peak_rss_kib as f64 / 1024.0);
-    println!("| subscriber: upserts / removes | {upserts} / {removes} |");
+    println!("| subscriber: shapes / poses / removes | {shapes} / {poses} / {removes} |");
+    let run_s = seconds.max(1e-9);
+    println!(
+        "| subscriber: bytes of shapes / poses / the rest | {shape_bytes} / {pose_bytes} / \
+         {other_bytes} ({:.0} B/s in all) |",
+        (shape_bytes + pose_bytes + other_bytes) as f64 / run_s
+    );
+    println!(
+        "| subscriber: bytes per shape face / per pose | {:.1} / {:.0} |",
+        shape_bytes as f64 / faces.max(1) as f64,
+        pose_bytes as f64 / poses.max(1) as f64
+    );
     println!(
         "| subscriber: data age at arrival p50 / p99 | {:.1} / {:.1} ms |",
         pct(0.5),
@@ -155,7 +203,7 @@ fn main() {
         pct_of(&mesh_ages_ms, 0.99)
     );
     println!(
-        "| — of {} moves (same mesh, new pose) p50 / p99 | {:.1} / {:.1} ms |",
+        "| — of {} poses (moves and sightings, by last seen) p50 / p99 | {:.1} / {:.1} ms |",
         moved_ages_ms.len(),
         pct_of(&moved_ages_ms, 0.5),
         pct_of(&moved_ages_ms, 0.99)

@@ -4,7 +4,7 @@
 //! Runs the real `tacmesh run` on the demo scene (objects coming and going: the cylinder leaves
 //! and comes back, the cone slides, the whole scene loops every 36 s) with one subscriber, and
 //! every 10 s samples the daemon's resident memory (VmRSS), the frames in and dropped since
-//! the last sample, the objects tracked, meshes published, the subscriber's upserts and
+//! the last sample, the objects tracked, shapes published, the subscriber's updates (shapes, poses) and
 //! removes, and the daemon's frame-to-publish p50/p99 (over its last 90 s). Writes one CSV row
 //! per sample and prints a summary table; `python3 benches/plot_soak.py CSV PNG` draws it.
 
@@ -22,7 +22,7 @@ const SAMPLE_EVERY: Duration = Duration::from_secs(10);
 #[derive(Default)]
 struct Seen {
     stats: Option<Stats>,
-    upserts: u64,
+    updates: u64,
     removes: u64,
 }
 
@@ -49,7 +49,7 @@ fn main() {
             let message = subscription.next_message();
             let mut seen = seen.lock().unwrap_or_else(|e| e.into_inner());
             match message {
-                Ok(Message::Upsert(_)) => seen.upserts += 1,
+                Ok(Message::Shape(_) | Message::Pose(_)) => seen.updates += 1,
                 Ok(Message::Remove { .. }) => seen.removes += 1,
                 Ok(Message::Stats(stats)) => seen.stats = Some(stats),
                 Ok(Message::Goodbye { .. }) | Err(_) => return,
@@ -61,7 +61,7 @@ fn main() {
     let mut csv = std::fs::File::create(&csv_path).expect("the CSV can be written");
     writeln!(
         csv,
-        "elapsed_s,rss_mib,frames_in,frames_dropped,objects,meshes_published,upserts,removes,\
+        "elapsed_s,rss_mib,frames_in,frames_dropped,objects,shapes_published,updates,removes,\
          f2p_p50_ms,f2p_p99_ms"
     )
     .expect("writes");
@@ -80,8 +80,8 @@ fn main() {
             (stats.frames_in - previous.0) as f64,
             (stats.frames_dropped - previous.1) as f64,
             stats.objects_tracked as f64,
-            stats.meshes_published as f64,
-            seen.upserts as f64,
+            stats.shapes_published as f64,
+            seen.updates as f64,
             seen.removes as f64,
             f64::from(stats.frame_to_publish_p50_ms),
             f64::from(stats.frame_to_publish_p99_ms),
@@ -130,7 +130,7 @@ fn main() {
         max(4)
     );
     println!(
-        "| subscriber upserts / removes | {:.0} / {:.0} |",
+        "| subscriber updates (shapes and poses) / removes | {:.0} / {:.0} |",
         rows.last().map_or(0.0, |r| r[6]),
         rows.last().map_or(0.0, |r| r[7])
     );

@@ -64,36 +64,70 @@ def frame(kind, payload=b""):
     return struct.pack("<IB", 1 + len(payload), kind) + payload
 
 
-def upsert(object_id, version, vertices, triangles):
-    payload = struct.pack("<QQQIIfII", object_id, version, 123_456_789, 2 * len(triangles),
-                          len(triangles), 0.002, len(vertices), len(triangles))
-    payload += b"".join(struct.pack("<3f", *v) for v in vertices)
-    payload += b"".join(struct.pack("<3I", *t) for t in triangles)
-    return frame(0x02, payload)
+def pose(object_id, shape_version, time_ns=1_000_000_000):
+    # object, shape version, pose time, its wall-clock time, last seen; identity rotation
+    # (x, y, z, w), a translation, linear and angular velocity: 92 bytes.
+    return struct.pack("<QQQQQ4f3f3f3f", object_id, shape_version, time_ns,
+                       1_700_000_000_000_000_000 + time_ns, time_ns + 33_000_000,
+                       0, 0, 0, 1, 0.1, -0.2, 1.0, 0.05, 0, 0, 0, 0, 0.3)
+
+
+def shape(object_id, version, vertices, triangles, compact=False):
+    payload = pose(object_id, version) + struct.pack(
+        "<QQBIIfBII", 900_000_000, 1_700_000_000_900_000_000, 0, 2 * len(triangles),
+        len(triangles), 0.002, 1 if compact else 0, len(vertices), len(triangles))
+    if compact:
+        lo = [min((v[k] for v in vertices), default=0.0) for k in range(3)]
+        hi = [max((v[k] for v in vertices), default=0.0) for k in range(3)]
+        payload += struct.pack("<6f", *lo, *hi)
+        step = [(h - l) / 65535 if h > l else 1.0 for l, h in zip(lo, hi)]
+        payload += b"".join(
+            struct.pack("<3H", *(round((v[k] - lo[k]) / step[k]) for k in range(3)))
+            for v in vertices)
+        payload += b"".join(struct.pack("<3H", *t) for t in triangles)
+    else:
+        payload += b"".join(struct.pack("<3f", *v) for v in vertices)
+        payload += b"".join(struct.pack("<3I", *t) for t in triangles)
+    return frame(0x08, payload)
+
+
+def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=3, ids=()):
+    payload = struct.pack("<BBfBI", encoding, resend, rate_hz, kinds, len(ids))
+    payload += b"".join(struct.pack("<Q", i) for i in ids)
+    return frame(0x81, payload)
 
 
 def wire_seeds():
     tetrahedron = ([(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0, 0, 0.1)],
                    [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)])
-    hello = frame(0x01, struct.pack("<H", 1) + text("tacmesh 0.1.0"))
-    stats = frame(0x05, struct.pack("<7Q2fI", 900, 3, 12_000, 2, 40, 38, 65_536, 12.5, 31.0, 2)
+    hello = frame(0x01, struct.pack("<H", 2) + text("tacmesh 0.1.0"))
+    options = subscribe()[5:]
+    session = frame(0x07, struct.pack("<QQ", 5_000_000_000, 1_700_000_005_000_000_000) + options)
+    stats = frame(0x0A, struct.pack("<19QIffI", 2_000_000_000, 1_700_000_002_000_000_000, 900,
+                                    3, 12_000, 1, 0, 0, 2, 5, 3, 40, 1, 38, 300, 65_536, 1, 0, 0,
+                                    2048, 12.5, 31.0, 2)
                   + text("reconstruct") + struct.pack("<2f", 4.0, 9.5)
                   + text("simplify") + struct.pack("<2f", 1.5, 3.25))
     goodbye = frame(0x06, text("shutting down"))
-    server = (hello + upsert(7, 1, *tetrahedron) + upsert(7, 2, *tetrahedron)
-              + frame(0x03, struct.pack("<Q", 7)) + frame(0x04) + stats + goodbye)
-    subscribe = frame(0x80)
+    server = (hello + session + shape(7, 1, *tetrahedron) + frame(0x09, pose(7, 1))
+              + frame(0x04) + shape(7, 2, *tetrahedron, compact=True)
+              + frame(0x09, pose(7, 2, 2_000_000_000)) + frame(0x03, struct.pack("<Q", 7))
+              + stats + goodbye)
     seeds = {
         "server-stream-whole": b"\xff" + server,
         "server-stream-bytewise": b"\x01" + server,
         "server-stream-chunks-7": b"\x07" + server,
         "hello": b"\xff" + hello,
-        "upsert": b"\xff" + upsert(1, 1, *tetrahedron),
-        "upsert-empty": b"\xff" + upsert(2, 1, [], []),
+        "session": b"\xff" + session,
+        "shape": b"\xff" + shape(1, 1, *tetrahedron),
+        "shape-compact": b"\xff" + shape(1, 1, *tetrahedron, compact=True),
+        "shape-empty": b"\xff" + shape(2, 1, [], []),
+        "pose": b"\xff" + frame(0x09, pose(3, 4)),
         "stats": b"\xff" + stats,
         "goodbye": b"\xff" + goodbye,
-        "client-subscribe": b"\x03" + subscribe + subscribe,
-        "oversize-prefix": b"\xff" + struct.pack("<IB", 0x7FFF_FFFF, 0x02),
+        "client-subscribe": b"\x03" + subscribe() + subscribe(1, 1, 10.0, 1, (4, 5)),
+        "client-subscribe-v1": b"\x03" + frame(0x80),
+        "oversize-prefix": b"\xff" + struct.pack("<IB", 0x7FFF_FFFF, 0x08),
     }
     return seeds
 

@@ -7,7 +7,7 @@ use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use tacmesh_protocol::{check_hello, encode, FrameDecoder, Message, Sender, WireError};
+use tacmesh_protocol::{check_hello, encode, FrameDecoder, Message, Sender, Subscribe, WireError};
 
 /// Why a subscription failed.
 /// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
@@ -24,6 +24,11 @@ pub enum SubscribeError {
     },
     #[error("reading from {}: {cause}", path.display())]
     Read {
+        path: PathBuf,
+        cause: std::io::Error,
+    },
+    #[error("writing to {}: {cause}", path.display())]
+    Write {
         path: PathBuf,
         cause: std::io::Error,
     },
@@ -46,22 +51,38 @@ pub struct Subscription {
 }
 
 impl Subscription {
-    /// Connects, sends Subscribe and reads the Hello (refusing another protocol version).
-    /// `read_timeout` bounds each wait for data (`None`: wait for ever).
+    /// Connects and reads the Hello (refusing another protocol version), with the daemon's
+    /// default options. `read_timeout` bounds each wait for data (`None`: wait for ever).
     pub fn connect(path: &Path, read_timeout: Option<Duration>) -> Result<Self, SubscribeError> {
+        Self::connect_with(path, read_timeout, None)
+    }
+
+    /// [`Subscription::connect`], then sends `options` if given. With `options.resend` the
+    /// daemon's first snapshot (default options) is followed by a second one under `options`:
+    /// a client keeping a scene starts it again at each Session.
+    pub fn connect_with(
+        path: &Path,
+        read_timeout: Option<Duration>,
+        options: Option<Subscribe>,
+    ) -> Result<Self, SubscribeError> {
         let connect_err = |cause| SubscribeError::Connect {
             path: path.to_owned(),
             cause,
         };
         let mut stream = UnixStream::connect(path).map_err(connect_err)?;
         stream.set_read_timeout(read_timeout).map_err(connect_err)?;
-        let mut hello = Vec::new();
-        // Subscribe is empty and always encodes. It is optional, and a failed write is not
-        // the error to report: a daemon that refuses this peer may already have sent its
-        // Goodbye and closed (the write then fails with a broken pipe), and the read below
-        // gets that Goodbye, or says what else went wrong.
-        if encode(&Message::Subscribe, &mut hello).is_ok() {
-            let _ = std::io::Write::write_all(&mut stream, &hello);
+        if let Some(options) = options {
+            let mut frame = Vec::new();
+            encode(&Message::Subscribe(options), &mut frame).map_err(|cause| {
+                SubscribeError::Wire {
+                    path: path.to_owned(),
+                    cause,
+                }
+            })?;
+            // A failed write is not the error to report: a daemon that refuses this peer may
+            // already have sent its Goodbye and closed (the write then fails with a broken
+            // pipe), and the read below gets that Goodbye, or says what else went wrong.
+            let _ = std::io::Write::write_all(&mut stream, &frame);
         }
         let mut subscription = Subscription {
             stream,
@@ -114,6 +135,19 @@ impl Subscription {
             }
             self.decoder.push(&self.buffer[..n]);
         }
+    }
+
+    /// Sends new options (see `docs/protocol.md`, Subscribe).
+    pub fn subscribe(&mut self, options: Subscribe) -> Result<(), SubscribeError> {
+        let mut frame = Vec::new();
+        encode(&Message::Subscribe(options), &mut frame).map_err(|cause| SubscribeError::Wire {
+            path: self.path.clone(),
+            cause,
+        })?;
+        std::io::Write::write_all(&mut self.stream, &frame).map_err(|cause| SubscribeError::Write {
+            path: self.path.clone(),
+            cause,
+        })
     }
 
     /// The underlying socket (tests use it to stall or misbehave on purpose).

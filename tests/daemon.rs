@@ -11,7 +11,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use tacmesh::glam::Vec3;
-use tacmesh::protocol::{Message, Upsert};
+use tacmesh::protocol::{Message, Scene, SceneChange, Shape};
 use tacmesh::sim::{point_to_mesh_distances, sample_cloud, SampleConfig, SceneFile, SceneObject};
 use tacmesh::subscriber::Subscription;
 use tacmesh::TriMesh;
@@ -95,36 +95,58 @@ impl Drop for Daemon {
 /// Every message a subscriber received, with when.
 #[derive(Default)]
 pub(crate) struct Received {
-    pub(crate) upserts: Vec<(Instant, Upsert)>,
+    /// Every new state of an object: each Shape, and each Pose applied to the shape it names
+    /// (so that `world_mesh()` of any entry is where the object was then).
+    pub(crate) updates: Vec<(Instant, Shape)>,
+    /// How many of `updates` were Pose messages.
+    pub(crate) poses: usize,
     pub(crate) removes: Vec<(Instant, u64)>,
     pub(crate) stats: Vec<(Instant, tacmesh::protocol::Stats)>,
     pub(crate) goodbye: bool,
+    /// The latest state of each object.
+    scene: Scene,
 }
 
 impl Received {
     /// Reads until `until` (or the connection ends).
     pub(crate) fn collect(subscription: &mut Subscription, until: Instant, into: &mut Received) {
         while Instant::now() < until && !into.goodbye {
-            match subscription.next_message() {
-                Ok(Message::Upsert(u)) => into.upserts.push((Instant::now(), u)),
-                Ok(Message::Remove { object_id }) => into.removes.push((Instant::now(), object_id)),
-                Ok(Message::Stats(s)) => into.stats.push((Instant::now(), s)),
-                Ok(Message::Goodbye { .. }) => into.goodbye = true,
-                Ok(_) => {}
+            let message = match subscription.next_message() {
+                Ok(message) => message,
                 Err(err) => panic!("subscription failed: {err}"),
+            };
+            let now = Instant::now();
+            match into.scene.apply(&message) {
+                SceneChange::Added(id) | SceneChange::Reshaped(id) | SceneChange::Moved(id) => {
+                    let object = into.scene.get(id).expect("just applied");
+                    if matches!(message, Message::Pose(_)) {
+                        into.poses += 1;
+                    }
+                    let mut state = object.shape.clone();
+                    state.pose = object.pose;
+                    into.updates.push((now, state));
+                }
+                SceneChange::Removed(id) => into.removes.push((now, id)),
+                _ => {}
+            }
+            match message {
+                Message::Stats(s) => into.stats.push((now, s)),
+                Message::Goodbye { .. } => into.goodbye = true,
+                _ => {}
             }
         }
     }
 
-    pub(crate) fn latest_meshes(&self) -> BTreeMap<u64, &Upsert> {
-        let mut latest = BTreeMap::new();
-        for (_, u) in &self.upserts {
-            latest.insert(u.object_id, u);
-        }
-        for (_, id) in &self.removes {
-            latest.remove(id);
-        }
-        latest
+    /// The latest state of every object still there.
+    pub(crate) fn latest_meshes(&self) -> BTreeMap<u64, Shape> {
+        self.scene
+            .objects()
+            .map(|object| {
+                let mut state = object.shape.clone();
+                state.pose = object.pose;
+                (object.object_id(), state)
+            })
+            .collect()
     }
 }
 
@@ -258,10 +280,10 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
     let latest = got.latest_meshes();
     let planes: Vec<_> = latest
         .values()
-        .filter(|u| u.object_id >= FIRST_PLANE_ID)
+        .filter(|u| u.object_id() >= FIRST_PLANE_ID)
         .collect();
     assert_eq!(planes.len(), 1, "one table plane: {:?}", latest.keys());
-    let table = &planes[0].mesh;
+    let table = &planes[0].world_mesh();
     assert!(
         (1..=8).contains(&table.triangles.len()),
         "the table is {} triangles",
@@ -273,14 +295,13 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
     let camera = daemon.scene.clone().into_camera().expect("camera");
     let truth = camera.scene_at(0);
     let visible = camera.visible_surface(0);
-    let objects: Vec<&Upsert> = latest
+    let objects: Vec<&Shape> = latest
         .values()
-        .filter(|u| u.object_id < FIRST_PLANE_ID)
-        .copied()
+        .filter(|u| u.object_id() < FIRST_PLANE_ID)
         .collect();
     assert_eq!(objects.len(), 3, "one mesh per object: {:?}", latest.keys());
     for upsert in objects {
-        let c = centroid(&upsert.mesh);
+        let c = centroid(&upsert.world_mesh());
         let object = truth
             .iter()
             .filter(|o| o.id != 0)
@@ -301,7 +322,7 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
             .expect("visible")
             .1;
         let samples = sample_cloud(
-            &upsert.mesh,
+            &upsert.world_mesh(),
             &SampleConfig {
                 points: 20_000,
                 noise_sigma_m: 0.0,
@@ -310,12 +331,12 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         )
         .expect("the published mesh samples");
         let accuracy = mean(&point_to_mesh_distances(&true_mesh, &samples.points).unwrap());
-        let completeness = mean(&point_to_mesh_distances(&upsert.mesh, seen).unwrap());
+        let completeness = mean(&point_to_mesh_distances(&upsert.world_mesh(), seen).unwrap());
         let visible_mhe = 0.5 * (accuracy + completeness);
-        let faces = upsert.mesh.triangles.len();
+        let faces = upsert.world_mesh().triangles.len();
         eprintln!(
             "object {} (scene id {}): {faces} faces, accuracy {:.2} mm, completeness {:.2} mm, visible MHE {:.2} mm",
-            upsert.object_id,
+            upsert.object_id(),
             object.id,
             accuracy * 1e3,
             completeness * 1e3,
@@ -329,10 +350,12 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         assert!(faces <= 300, "object {}: {faces} faces", object.id);
     }
 
-    // `tacmesh subscribe --count N --out DIR` takes the snapshot's meshes and exits.
+    // `tacmesh subscribe --count N --out DIR` takes the snapshot's meshes and exits: a Shape of
+    // each of the three objects and the table, and each object's latest sighting (a Pose: a
+    // static object is told seen about once a second).
     let out_dir = tempfile::tempdir().expect("a temporary folder");
     let subscribe = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
-        .args(["subscribe", "--count", "4", "--socket"])
+        .args(["subscribe", "--count", "7", "--socket"])
         .arg(&daemon.socket)
         .arg("--out")
         .arg(out_dir.path())
@@ -340,8 +363,12 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         .expect("tacmesh subscribe runs");
     let stdout = String::from_utf8_lossy(&subscribe.stdout);
     assert!(subscribe.status.success(), "{stdout}");
-    let upserts = stdout.lines().filter(|l| l.starts_with("upsert ")).count();
-    assert_eq!(upserts, 4, "{stdout}");
+    let shaped: std::collections::BTreeSet<&str> = stdout
+        .lines()
+        .filter_map(|l| l.strip_prefix("shape "))
+        .filter_map(|l| l.split(" version").next())
+        .collect();
+    assert_eq!(shaped.len(), 4, "{stdout}");
     let written: Vec<_> = std::fs::read_dir(out_dir.path()).unwrap().collect();
     assert_eq!(written.len(), 4, "{stdout}");
     for entry in written {
@@ -417,14 +444,14 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
     );
 
     // The moving sphere: one id whose meshes follow the path (y = -0.25) across x.
-    let near_path = |u: &Upsert| {
-        let c = centroid(&u.mesh);
-        u.object_id < FIRST_PLANE_ID && (c.y + 0.25).abs() < 0.07 && c.x.abs() < 0.4
+    let near_path = |u: &Shape| {
+        let c = centroid(&u.world_mesh());
+        u.object_id() < FIRST_PLANE_ID && (c.y + 0.25).abs() < 0.07 && c.x.abs() < 0.4
     };
     let mut path_ids: BTreeMap<u64, (f32, f32, usize)> = BTreeMap::new();
-    for (_, u) in got.upserts.iter().filter(|(_, u)| near_path(u)) {
-        let x = centroid(&u.mesh).x;
-        let entry = path_ids.entry(u.object_id).or_insert((x, x, 0));
+    for (_, u) in got.updates.iter().filter(|(_, u)| near_path(u)) {
+        let x = centroid(&u.world_mesh()).x;
+        let entry = path_ids.entry(u.object_id()).or_insert((x, x, 0));
         entry.0 = entry.0.min(x);
         entry.1 = entry.1.max(x);
         entry.2 += 1;
@@ -445,9 +472,9 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
     // all through the run, including after the garbage client (a blocking design would stall
     // for the daemon's 5 s write timeout).
     let sphere_times: Vec<Instant> = got
-        .upserts
+        .updates
         .iter()
-        .filter(|(_, u)| u.object_id == sphere_id)
+        .filter(|(_, u)| u.object_id() == sphere_id)
         .map(|(t, _)| *t)
         .collect();
     let largest_gap = sphere_times
@@ -466,13 +493,13 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
 
     // The cylinder left at 4 s: its id was removed and did not come back.
     let cylinder_ids: Vec<u64> = got
-        .upserts
+        .updates
         .iter()
         .filter(|(_, u)| {
-            let c = centroid(&u.mesh);
-            u.object_id < FIRST_PLANE_ID && c.distance(Vec3::new(0.3, 0.25, 0.07)) < 0.08
+            let c = centroid(&u.world_mesh());
+            u.object_id() < FIRST_PLANE_ID && c.distance(Vec3::new(0.3, 0.25, 0.07)) < 0.08
         })
-        .map(|(_, u)| u.object_id)
+        .map(|(_, u)| u.object_id())
         .collect();
     let cylinder_id = *cylinder_ids.first().expect("the cylinder got a mesh");
     let removed_at = got
@@ -482,9 +509,9 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
         .map(|(t, _)| *t)
         .expect("the cylinder was removed after it left");
     assert!(got
-        .upserts
+        .updates
         .iter()
-        .all(|(t, u)| u.object_id != cylinder_id || *t < removed_at));
+        .all(|(t, u)| u.object_id() != cylinder_id || *t < removed_at));
 
     drop(stalled);
     // SIGTERM: exit 0 within a couple of seconds, goodbye sent, socket removed.
@@ -524,14 +551,14 @@ fn two_cameras_feed_one_object_map() {
     let latest = got.latest_meshes();
     let planes = latest.keys().filter(|&&id| id >= FIRST_PLANE_ID).count();
     assert_eq!(planes, 1, "{:?}", latest.keys());
-    for upsert in latest.values().filter(|u| u.object_id < FIRST_PLANE_ID) {
-        let (lo, hi) = upsert.mesh.bounds().expect("a mesh");
+    for upsert in latest.values().filter(|u| u.object_id() < FIRST_PLANE_ID) {
+        let (lo, hi) = upsert.world_mesh().bounds().expect("a mesh");
         // Seen from both sides, a 0.2 m object's mesh spans (nearly) its full depth in y;
         // one view of the sphere or torus gives about half of it.
         assert!(
             hi.y - lo.y > 0.17,
             "object {}: y extent {} m",
-            upsert.object_id,
+            upsert.object_id(),
             hi.y - lo.y
         );
     }

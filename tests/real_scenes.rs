@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use tacmesh::glam::Vec3;
-use tacmesh::protocol::Message;
+use tacmesh::protocol::{Message, Scene as Published, SceneChange};
 use tacmesh::segment::grid::VoxelGrid;
 use tacmesh::source::monotonic_now;
 use tacmesh::TriMesh;
@@ -129,26 +129,18 @@ fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
     );
     let mut subscription = daemon.subscribe();
 
-    let mut published: BTreeMap<u64, (TriMesh, u64)> = BTreeMap::new();
+    let mut published = Published::new();
     let mut checked = 0;
     let mut missed = Vec::new();
     let mut failures = Vec::new();
     let deadline = Instant::now() + scene_time * NAMES.len() as u32 * 3 + Duration::from_secs(30);
     while checked < NAMES.len() && Instant::now() < deadline {
-        let frames_in = match subscription.next_message().expect("the subscription") {
-            Message::Upsert(u) => {
-                if u.object_id < FIRST_PLANE_ID {
-                    published.insert(u.object_id, (u.mesh, u.capture_time_ns));
-                }
-                continue;
-            }
-            Message::Remove { object_id } => {
-                published.remove(&object_id);
-                continue;
-            }
-            Message::Stats(stats) => stats.frames_in as usize,
-            _ => continue,
+        let message = subscription.next_message().expect("the subscription");
+        published.apply(&message);
+        let Message::Stats(stats) = message else {
+            continue;
         };
+        let frames_in = stats.frames_in as usize;
         // Scene `checked` is judged once 1.2 s of its frames have come in, before
         // the next scene's first frame.
         if frames_in < checked * FRAMES_PER_SCENE + JUDGED_AFTER_FRAMES {
@@ -163,10 +155,15 @@ fn a_scene_change_replaces_what_is_published_within_a_second_or_so() {
         let scene = &scenes[checked];
         let near_scene = Nearest::new(&scene.points, 0.05);
         let mut surfaces = Vec::new();
-        for (id, (mesh, capture_ns)) in &published {
-            let samples = surface_samples(mesh, 2000);
+        for object in published
+            .objects()
+            .filter(|o| o.object_id() < FIRST_PLANE_ID)
+        {
+            let (id, mesh) = (object.object_id(), object.world_mesh());
+            let capture_ns = object.shape.shape_time_ns.max(object.pose.last_seen_ns);
+            let samples = surface_samples(&mesh, 2000);
             let off = median(samples.iter().map(|&p| near_scene.distance(p)).collect());
-            let age_s = now_ns.saturating_sub(*capture_ns) as f64 / 1e9;
+            let age_s = now_ns.saturating_sub(capture_ns) as f64 / 1e9;
             eprintln!(
                 "{} (scene {checked}): object {id}: {} faces, median {:.1} mm off the scene, \
                  data {age_s:.1} s old",
@@ -350,7 +347,7 @@ fn play(spec: &str, seconds: f64) -> (BTreeMap<u64, TriMesh>, usize, usize, f64,
     let mut daemon = Run::start(&["--sensor", spec, "--loop"], &dir.path().join("t.sock"));
     let mut subscription = daemon.subscribe();
     let started = Instant::now();
-    let mut published: BTreeMap<u64, TriMesh> = BTreeMap::new();
+    let mut published = Published::new();
     let mut half_births = None;
     let mut peak_kib = 0;
     while started.elapsed() < Duration::from_secs_f64(seconds) {
@@ -358,15 +355,7 @@ fn play(spec: &str, seconds: f64) -> (BTreeMap<u64, TriMesh>, usize, usize, f64,
             half_births = Some(births(&daemon.log()));
         }
         peak_kib = peak_kib.max(daemon.rss_kib());
-        match subscription.next_message().expect("the subscription") {
-            Message::Upsert(u) if u.object_id < FIRST_PLANE_ID => {
-                published.insert(u.object_id, u.mesh);
-            }
-            Message::Remove { object_id } => {
-                published.remove(&object_id);
-            }
-            _ => {}
-        }
+        published.apply(&subscription.next_message().expect("the subscription"));
     }
     assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
     let log = daemon.log();
@@ -375,7 +364,7 @@ fn play(spec: &str, seconds: f64) -> (BTreeMap<u64, TriMesh>, usize, usize, f64,
     let first_half = half_births.unwrap_or(0);
     let second_half = births(&log) - first_half;
     (
-        published,
+        world_meshes(&published),
         first_half,
         second_half,
         peak_kib as f64 / 1024.0,
@@ -533,13 +522,13 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
     let mut daemon = Run::start(&["--sensor", &spec, "--loop"], &dir.path().join("t.sock"));
     let mut subscription = daemon.subscribe();
     let started = Instant::now();
-    let mut latest: BTreeMap<u64, TriMesh> = BTreeMap::new();
+    let mut published = Published::new();
     let mut converged: Option<BTreeMap<u64, (f32, f32, f32)>> = None;
     let mut removed = Vec::new();
     while started.elapsed() < Duration::from_secs_f64(SECONDS) {
         if converged.is_none() && started.elapsed() >= Duration::from_secs_f64(CONVERGED_AT_S) {
             converged = Some(
-                latest
+                world_meshes(&published)
                     .iter()
                     .map(|(&id, m)| {
                         let range_m = mean_range_m(&surface_samples(m, 4000));
@@ -548,19 +537,14 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
                     .collect(),
             );
         }
-        match subscription.next_message().expect("the subscription") {
-            Message::Upsert(u) if u.object_id < FIRST_PLANE_ID => {
-                latest.insert(u.object_id, u.mesh);
+        let message = subscription.next_message().expect("the subscription");
+        if let SceneChange::Removed(object_id) = published.apply(&message) {
+            if converged.is_some() {
+                removed.push(object_id);
             }
-            Message::Remove { object_id } => {
-                if converged.is_some() {
-                    removed.push(object_id);
-                }
-                latest.remove(&object_id);
-            }
-            _ => {}
         }
     }
+    let latest = world_meshes(&published);
     assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
     let log = daemon.log();
     let (status, _) = daemon.terminate();
@@ -614,4 +598,13 @@ fn camera_jitter_neither_bloats_nor_drops_static_objects() {
         failures.join("\n"),
         log_lines_about_objects(&log).join("\n")
     );
+}
+
+/// The world mesh of every object (support planes left out) a subscriber holds.
+fn world_meshes(scene: &Published) -> BTreeMap<u64, TriMesh> {
+    scene
+        .objects()
+        .filter(|object| object.object_id() < FIRST_PLANE_ID)
+        .map(|object| (object.object_id(), object.world_mesh()))
+        .collect()
 }

@@ -105,6 +105,16 @@ impl Run {
         Subscription::connect(&self.socket, Some(Duration::from_secs(10))).expect("subscribes")
     }
 
+    /// A subscription that sends `options` (see `docs/protocol.md`, Subscribe).
+    pub(crate) fn subscribe_with(&self, options: tacmesh::protocol::Subscribe) -> Subscription {
+        Subscription::connect_with(&self.socket, Some(Duration::from_secs(10)), Some(options))
+            .expect("subscribes")
+    }
+
+    pub(crate) fn socket(&self) -> &Path {
+        &self.socket
+    }
+
     pub(crate) fn running(&mut self) -> bool {
         self.child.try_wait().expect("waits").is_none()
     }
@@ -332,14 +342,14 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
     );
 
     let times: Vec<Instant> = got
-        .upserts
+        .updates
         .iter()
         .map(|(t, _)| *t)
         .filter(|&t| t > attack_started)
         .collect();
     let gap = largest_gap(&times);
     eprintln!(
-        "malicious clients: RSS {} -> {} MiB; {} upserts to the good subscriber during the \
+        "malicious clients: RSS {} -> {} MiB; {} updates to the good subscriber during the \
          {attack_took:.1?} attack, largest gap {gap:?}; 2,000 cycles in {cycles_took:.1?}; \
          {dropped} clients dropped, {connected} still connected at exit",
         rss_before_kib / 1024,
@@ -417,7 +427,8 @@ fn sensor_faults_are_counted_survived_and_do_not_lose_published_meshes() {
     let mut snapshot = Vec::new();
     loop {
         match late_joiner.next_message().expect("the snapshot") {
-            Message::Upsert(u) => snapshot.push(u.object_id),
+            Message::Session(_) | Message::Pose(_) => {}
+            Message::Shape(u) => snapshot.push(u.object_id()),
             Message::SnapshotDone => break,
             other => panic!("{} in the snapshot", other.name()),
         }
@@ -580,7 +591,8 @@ fn a_hung_sensor_blocks_neither_subscribers_nor_shutdown() {
     let mut snapshot = Vec::new();
     loop {
         match late_joiner.next_message().expect("the snapshot") {
-            Message::Upsert(u) => snapshot.push(u.object_id),
+            Message::Session(_) | Message::Pose(_) => {}
+            Message::Shape(u) => snapshot.push(u.object_id()),
             Message::SnapshotDone => break,
             other => panic!("{} in the snapshot", other.name()),
         }
@@ -600,7 +612,7 @@ fn a_hung_sensor_blocks_neither_subscribers_nor_shutdown() {
 }
 
 /// SIGKILL mid-stream leaves the socket file behind; a new daemon on the same path removes
-/// the stale socket and serves, and a client that reconnects gets Hello, then an Upsert of
+/// the stale socket and serves, and a client that reconnects gets Hello, then a Shape of
 /// every object, then SnapshotDone.
 #[test]
 fn sigkill_then_restart_on_the_same_socket_gives_reconnecting_clients_a_full_snapshot() {
@@ -670,9 +682,10 @@ fn sigkill_then_restart_on_the_same_socket_gives_reconnecting_clients_a_full_sna
     let mut snapshot = Vec::new();
     loop {
         match again.next_message().expect("the snapshot") {
-            Message::Upsert(u) => {
-                assert!(!u.mesh.triangles.is_empty(), "object {}", u.object_id);
-                snapshot.push(u.object_id);
+            Message::Session(_) | Message::Pose(_) => {}
+            Message::Shape(u) => {
+                assert!(!u.mesh.triangles.is_empty(), "object {}", u.object_id());
+                snapshot.push(u.object_id());
             }
             Message::SnapshotDone => break,
             other => panic!("{} in the snapshot", other.name()),
@@ -717,15 +730,15 @@ fn sigterm_under_full_load_exits_cleanly_and_quickly() {
     for reader in readers {
         let got = reader.finish();
         assert!(got.goodbye, "a subscriber got no Goodbye");
-        assert!(!got.upserts.is_empty());
+        assert!(!got.updates.is_empty());
     }
     assert!(!daemon.socket.exists(), "the socket file was left behind");
 }
 
 /// The demo scene unpaced for 20 s: the camera renders far faster than the pipeline handles
 /// frames. Frames are dropped and counted, RSS stays within 50 MiB of its value at 5 s, and
-/// what is published stays fresh: the age of the data in each Upsert (now − capture time, both
-/// on CLOCK_MONOTONIC) has a p99 under 5 s (see the assertion for why not 2 s).
+/// what is published stays fresh: the age of the data in each Shape and Pose (now − its
+/// shape time or last-seen time, both on CLOCK_MONOTONIC) has a p99 under 5 s (see the assertion for why not 2 s).
 #[test]
 fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
     let _one = ONE_DAEMON_AT_A_TIME
@@ -739,27 +752,23 @@ fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
     let started = Instant::now();
     let mut subscription = daemon.subscribe();
     let mut ages_ms = Vec::new();
-    // A moved object is republished with the same triangles and report (from the frame path);
-    // anything else is a new mesh (from the mesher): their ages differ.
-    let mut last_report = std::collections::HashMap::new();
+    // A move or a sighting is a Pose (from the frame path); a new mesh is a Shape (from the
+    // mesher): their ages differ.
     let (mut moved_ages_ms, mut mesh_ages_ms) = (Vec::new(), Vec::new());
     let mut stats = Vec::new();
     let mut rss_at_5s_kib = None;
     let mut rss_peak_kib = 0;
     while started.elapsed() < Duration::from_secs(20) {
         match subscription.next_message().expect("the subscription") {
-            Message::Upsert(u) => {
-                let age_ns = monotonic_now()
-                    .as_nanos()
-                    .saturating_sub(u128::from(u.capture_time_ns));
-                let age_ms = age_ns as f64 / 1e6;
+            Message::Shape(u) => {
+                let age_ms = age_ms_of(u.shape_time_ns);
                 ages_ms.push(age_ms);
-                let key = (u.mesh.triangles.len(), u.report);
-                if last_report.insert(u.object_id, key) == Some(key) {
-                    moved_ages_ms.push(age_ms);
-                } else {
-                    mesh_ages_ms.push(age_ms);
-                }
+                mesh_ages_ms.push(age_ms);
+            }
+            Message::Pose(p) => {
+                let age_ms = age_ms_of(p.last_seen_ns);
+                ages_ms.push(age_ms);
+                moved_ages_ms.push(age_ms);
             }
             Message::Stats(s) => {
                 let rss = daemon.rss_kib();
@@ -803,7 +812,7 @@ fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
     eprintln!(
         "overload over {last_at:.1?}: {} frames in, {} dropped, {processed} processed \
          ({:.1}× the pipeline's rate); RSS {} MiB at 5 s, {} MiB at the end, peak {} MiB; data \
-         age of {} upserts p50 {p50:.0} ms, p99 {p99:.0} ms, max {max:.0} ms (p99 of {} moves \
+         age of {} updates p50 {p50:.0} ms, p99 {p99:.0} ms, max {max:.0} ms (p99 of {} moves \
          {moved_p99:.0} ms, of {} new meshes {mesh_p99:.0} ms)",
         last.frames_in,
         last.frames_dropped,
@@ -824,7 +833,7 @@ fn overload_drops_frames_keeps_rss_flat_and_published_data_fresh() {
         rss_end_kib < rss_at_5s_kib + 50 * 1024,
         "RSS grew from {rss_at_5s_kib} to {rss_end_kib} KiB"
     );
-    assert!(ages_ms.len() >= 20, "only {} upserts", ages_ms.len());
+    assert!(ages_ms.len() >= 20, "only {} updates", ages_ms.len());
     // The issue asks for "bounded"; 2 s is the figure of an idle machine. On this shared 2-core
     // machine the unpaced simulator itself takes a core from the pipeline, and other builds
     // run beside the tests (a load average of 9 was seen, with a p99 of 2.7 s), so the bound
@@ -856,7 +865,7 @@ fn only_the_allowed_users_may_subscribe() {
             let until = Instant::now() + Duration::from_secs(30);
             loop {
                 match subscription.next_message() {
-                    Ok(Message::Upsert(_)) => break,
+                    Ok(Message::Shape(_)) => break,
                     Ok(_) => {}
                     Err(err) => panic!("the allowed user lost its subscription: {err}"),
                 }
@@ -933,14 +942,14 @@ fn a_closed_log_stream_neither_stops_serving_nor_spoils_the_shutdown() {
     let (status, _) = crate::util::terminate(&mut child, Duration::from_secs(15));
     let got = subscriber.finish();
     eprintln!(
-        "closed stderr: first line {first:?}; {} upserts, exit {status}",
-        got.upserts.len()
+        "closed stderr: first line {first:?}; {} updates, exit {status}",
+        got.updates.len()
     );
     assert!(status.success(), "exit {status}");
     assert!(
-        got.upserts
+        got.updates
             .iter()
-            .any(|(_, u)| u.object_id < FIRST_PLANE_ID),
+            .any(|(_, u)| u.object_id() < FIRST_PLANE_ID),
         "no object mesh reached the subscriber"
     );
     assert!(got.goodbye, "no Goodbye");
@@ -967,11 +976,22 @@ fn a_subscriber_back_from_a_20_s_stall_reads_current_meshes_after_a_few_stale_fr
     std::thread::sleep(Duration::from_secs(20));
     let resumed = monotonic_now();
     let reading = Instant::now();
-    // (object, version, capture time) of every Upsert in the first 2 s after the stall.
+    // (object, (shape version, pose time), newest data time) of every Shape and Pose in the
+    // first 2 s after the stall.
     let mut read = Vec::new();
     while reading.elapsed() < Duration::from_secs(2) {
-        if let Message::Upsert(u) = subscription.next_message().expect("the subscription") {
-            read.push((u.object_id, u.version, u.capture_time_ns));
+        match subscription.next_message().expect("the subscription") {
+            Message::Shape(u) => read.push((
+                u.object_id(),
+                (u.version(), u.pose.pose_time_ns),
+                u.shape_time_ns.max(u.pose.last_seen_ns),
+            )),
+            Message::Pose(p) => read.push((
+                p.object_id,
+                (p.shape_version, p.pose_time_ns),
+                p.last_seen_ns,
+            )),
+            _ => {}
         }
     }
     // Stale: older than the stall's last 2 s, with a newer version of the same object read
@@ -988,7 +1008,7 @@ fn a_subscriber_back_from_a_20_s_stall_reads_current_meshes_after_a_few_stale_fr
         })
         .count();
     eprintln!(
-        "after a 20 s stall: {} upserts in 2 s, {stale} of them stale",
+        "after a 20 s stall: {} updates in 2 s, {stale} of them stale",
         read.len()
     );
     assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
@@ -998,5 +1018,13 @@ fn a_subscriber_back_from_a_20_s_stall_reads_current_meshes_after_a_few_stale_fr
         "the stalled subscriber was dropped:\n{log}"
     );
     assert!(!read.is_empty(), "nothing was read after the stall");
-    assert!(stale <= 6, "{stale} stale upserts before the current ones");
+    assert!(stale <= 6, "{stale} stale updates before the current ones");
+}
+
+/// The age in milliseconds of data captured at `capture_ns` on CLOCK_MONOTONIC.
+fn age_ms_of(capture_ns: u64) -> f64 {
+    monotonic_now()
+        .as_nanos()
+        .saturating_sub(u128::from(capture_ns)) as f64
+        / 1e6
 }

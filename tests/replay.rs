@@ -53,7 +53,7 @@ fn first_object_mesh_and_log(spec: &str, options: &[&str], level: &str) -> (usiz
         Subscription::connect(&socket, Some(Duration::from_secs(30))).expect("subscribes");
     let faces = loop {
         match subscription.next_message() {
-            Ok(Message::Upsert(u)) if u.object_id < 1 << 32 && !u.mesh.triangles.is_empty() => {
+            Ok(Message::Shape(u)) if u.object_id() < 1 << 32 && !u.mesh.triangles.is_empty() => {
                 break u.mesh.triangles.len();
             }
             Ok(_) => {}

@@ -1,16 +1,19 @@
-//! Byte stream → messages: frame splitting, then one parser per message kind.
+//! Byte stream → messages: frame splitting, then one parser per message kind. The checks on
+//! what a frame holds are the encoder's (`encode.rs`), so both sides refuse the same things:
+//! the list in `docs/protocol.md`, "A receiver refuses…".
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::encode::{
-    check_number, PREFIX_BYTES, STAGE_FIXED_BYTES, TRIANGLE_BYTES, UPSERT_HEADER_BYTES,
-    VERTEX_BYTES,
+    check_flags, check_id_count, check_kinds, check_number, check_pose, check_triangle,
+    check_vertex, compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, ID_BYTES, PREFIX_BYTES,
+    SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_RESEND, TRIANGLE_BYTES, VERTEX_BYTES,
 };
 use crate::error::WireError;
 use crate::message::{
-    kind, Message, Sender, SimplifyStats, StageLatency, Stats, Upsert, MAX_FRAME_BYTES,
-    MAX_NAME_BYTES, MAX_REASON_BYTES,
+    kind, Encoding, Message, Pose, Sender, Session, Shape, SimplifyStats, StageLatency, Stats,
+    Subscribe, MAX_FRAME_BYTES, MAX_NAME_BYTES, MAX_REASON_BYTES,
 };
 
 /// Splits a byte stream into frames and decodes them, for one direction of a connection.
@@ -58,6 +61,10 @@ impl FrameDecoder {
     }
 
     /// The next whole message, `Ok(None)` until one is fully buffered.
+    ///
+    /// A [`Shape`] in the compact encoding comes back with the vertices the receiver reads
+    /// (dequantised), its `max_residual_m` as sent (the quantisation bound included) and
+    /// `encoding` [`Encoding::Compact`].
     pub fn next_message(&mut self) -> Result<Option<Message>, WireError> {
         let pending = &self.buffer[self.consumed..];
         let Some((prefix, rest)) = pending.split_first_chunk::<PREFIX_BYTES>() else {
@@ -83,6 +90,7 @@ fn decode_frame(frame: &[u8], from: Sender) -> Result<Message, WireError> {
     let Some((&kind, payload)) = frame.split_first() else {
         return Err(WireError::EmptyFrame);
     };
+    // The retired kinds (0x02, 0x05) have no name, so they are unknown like any other.
     let name = kind::name(kind).ok_or(WireError::UnknownKind { kind })?;
     let sender = if kind & 0x80 == 0 {
         Sender::Server
@@ -105,7 +113,13 @@ fn decode_frame(frame: &[u8], from: Sender) -> Result<Message, WireError> {
             protocol_version: r.u16("protocol_version")?,
             server: r.text("server", MAX_NAME_BYTES)?,
         },
-        kind::UPSERT => Message::Upsert(read_upsert(&mut r)?),
+        kind::SESSION => Message::Session(Session {
+            monotonic_ns: r.u64("monotonic_ns")?,
+            realtime_ns: r.u64("realtime_ns")?,
+            options: read_options(&mut r)?,
+        }),
+        kind::SHAPE => Message::Shape(read_shape(&mut r)?),
+        kind::POSE => Message::Pose(read_pose(&mut r)?),
         kind::REMOVE => Message::Remove {
             object_id: r.u64("object_id")?,
         },
@@ -114,45 +128,108 @@ fn decode_frame(frame: &[u8], from: Sender) -> Result<Message, WireError> {
         kind::GOODBYE => Message::Goodbye {
             reason: r.text("reason", MAX_REASON_BYTES)?,
         },
-        kind::SUBSCRIBE => Message::Subscribe,
+        kind::SUBSCRIBE => Message::Subscribe(read_options(&mut r)?),
+        kind::SUBSCRIBE_V1 => Message::SubscribeV1,
         _ => return Err(WireError::UnknownKind { kind }),
     };
     r.finish()?;
     Ok(message)
 }
 
-fn read_upsert(r: &mut Reader<'_>) -> Result<Upsert, WireError> {
-    let available_at_start = r.bytes.len();
-    let object_id = r.u64("object_id")?;
-    let version = r.u64("version")?;
-    let capture_time_ns = r.u64("capture_time_ns")?;
+/// A Subscribe payload, or the options at the end of a Session.
+fn read_options(r: &mut Reader<'_>) -> Result<Subscribe, WireError> {
+    let encoding = r.encoding()?;
+    let flags = r.u8("flags")?;
+    check_flags(r.message, "flags", flags, SUBSCRIBE_RESEND)?;
+    let max_rate_hz = r.f32("max_rate_hz")?;
+    check_number("max_rate_hz", max_rate_hz)?;
+    let kinds = check_kinds(r.message, r.u8("kinds")?)?;
+    let id_count = r.u32("id_count")?;
+    check_id_count(r.message, u64::from(id_count))?;
+    r.ensure("object_ids", u64::from(id_count) * ID_BYTES as u64)?;
+    let object_ids = (0..id_count)
+        .map(|_| r.u64("object_ids"))
+        .collect::<Result<_, _>>()?;
+    Ok(Subscribe {
+        encoding,
+        resend: flags & SUBSCRIBE_RESEND != 0,
+        max_rate_hz,
+        kinds,
+        object_ids,
+    })
+}
+
+/// A Pose payload, or the start of a Shape's.
+fn read_pose(r: &mut Reader<'_>) -> Result<Pose, WireError> {
+    let pose = Pose {
+        object_id: r.u64("object_id")?,
+        shape_version: r.u64("shape_version")?,
+        pose_time_ns: r.u64("pose_time_ns")?,
+        pose_time_realtime_ns: r.u64("pose_time_realtime_ns")?,
+        last_seen_ns: r.u64("last_seen_ns")?,
+        rotation: Quat::from_array([
+            r.f32("rotation")?,
+            r.f32("rotation")?,
+            r.f32("rotation")?,
+            r.f32("rotation")?,
+        ]),
+        translation: r.vec3("translation")?,
+        linear_velocity: r.vec3("linear_velocity")?,
+        angular_velocity: r.vec3("angular_velocity")?,
+    };
+    // Finite, unit rotation, last seen not before the pose time.
+    check_pose(&pose, r.message)?;
+    Ok(pose)
+}
+
+fn read_shape(r: &mut Reader<'_>) -> Result<Shape, WireError> {
+    let pose = read_pose(r)?;
+    let shape_time_ns = r.u64("shape_time_ns")?;
+    let shape_time_realtime_ns = r.u64("shape_time_realtime_ns")?;
+    let flags = r.u8("flags")?;
+    check_flags(r.message, "flags", flags, SHAPE_FLAGS)?;
     let faces_in = r.u32("faces_in")?;
     let faces_out = r.u32("faces_out")?;
     let max_residual_m = r.f32("max_residual_m")?;
     check_number("max_residual_m", max_residual_m)?;
+    let encoding = r.encoding()?;
     let vertex_count = r.u32("vertex_count")? as usize;
     let triangle_count = r.u32("triangle_count")? as usize;
-    debug_assert_eq!(available_at_start - r.bytes.len(), UPSERT_HEADER_BYTES);
+    let mesh = match encoding {
+        Encoding::Full => read_full_geometry(r, vertex_count, triangle_count)?,
+        Encoding::Compact => read_compact_geometry(r, vertex_count, triangle_count)?,
+    };
+    Ok(Shape {
+        pose,
+        shape_time_ns,
+        shape_time_realtime_ns,
+        flags,
+        mesh,
+        report: SimplifyStats {
+            faces_in,
+            faces_out,
+            max_residual_m,
+        },
+        encoding,
+    })
+}
 
+/// V × 3 f32 vertices, then T × 3 u32 indices.
+fn read_full_geometry(
+    r: &mut Reader<'_>,
+    vertex_count: usize,
+    triangle_count: usize,
+) -> Result<TriMesh, WireError> {
     // Check the counts against the frame before allocating anything they size.
-    let needed =
-        vertex_count as u64 * VERTEX_BYTES as u64 + triangle_count as u64 * TRIANGLE_BYTES as u64;
-    if needed > r.bytes.len() as u64 {
-        return Err(WireError::Truncated {
-            message: r.message,
-            field: "vertices and triangles",
-            needed,
-            available: r.bytes.len(),
-        });
-    }
-
+    r.ensure(
+        "vertices and triangles",
+        vertex_count as u64 * VERTEX_BYTES as u64 + triangle_count as u64 * TRIANGLE_BYTES as u64,
+    )?;
     let mut vertices = Vec::with_capacity(vertex_count);
     for vertex in 0..vertex_count {
-        let xyz = [r.f32("vertices")?, r.f32("vertices")?, r.f32("vertices")?];
-        if let Some(&value) = xyz.iter().find(|v| !v.is_finite()) {
-            return Err(WireError::NonFiniteVertex { vertex, value });
-        }
-        vertices.push(Vec3::from_array(xyz));
+        let p = r.vec3("vertices")?;
+        check_vertex(vertex, p)?;
+        vertices.push(p);
     }
     let mut triangles = Vec::with_capacity(triangle_count);
     for triangle in 0..triangle_count {
@@ -161,68 +238,98 @@ fn read_upsert(r: &mut Reader<'_>) -> Result<Upsert, WireError> {
             r.u32("triangles")?,
             r.u32("triangles")?,
         ];
-        if let Some(&index) = corners.iter().find(|&&i| i as usize >= vertex_count) {
-            return Err(WireError::IndexOutOfRange {
-                triangle,
-                index,
-                vertex_count,
-            });
-        }
+        check_triangle(triangle, corners, vertex_count)?;
         triangles.push(corners);
     }
-    Ok(Upsert {
-        object_id,
-        version,
-        capture_time_ns,
-        mesh: TriMesh::new(vertices, triangles),
-        report: SimplifyStats {
-            faces_in,
-            faces_out,
-            max_residual_m,
-        },
-    })
+    Ok(TriMesh::new(vertices, triangles))
+}
+
+/// The box, V × 3 u16 steps, then T × 3 indices of u16 (V ≤ 65,536) or u32.
+fn read_compact_geometry(
+    r: &mut Reader<'_>,
+    vertex_count: usize,
+    triangle_count: usize,
+) -> Result<TriMesh, WireError> {
+    let compact_box = CompactBox {
+        min: r.vec3("box_min")?,
+        max: r.vec3("box_max")?,
+    };
+    compact_box.check(r.message)?;
+    let index_bytes = compact_index_bytes(vertex_count);
+    r.ensure(
+        "vertices and triangles",
+        vertex_count as u64 * COMPACT_VERTEX_BYTES as u64
+            + triangle_count as u64 * 3 * index_bytes as u64,
+    )?;
+    let mut vertices = Vec::with_capacity(vertex_count);
+    for vertex in 0..vertex_count {
+        let q = [r.u16("vertices")?, r.u16("vertices")?, r.u16("vertices")?];
+        // Finite for any box the encoder writes; a hostile box can still overflow.
+        let p = compact_box.dequantise(q);
+        check_vertex(vertex, p)?;
+        vertices.push(p);
+    }
+    let mut triangles = Vec::with_capacity(triangle_count);
+    for triangle in 0..triangle_count {
+        let mut corners = [0; 3];
+        for corner in &mut corners {
+            *corner = if index_bytes == 2 {
+                u32::from(r.u16("triangles")?)
+            } else {
+                r.u32("triangles")?
+            };
+        }
+        check_triangle(triangle, corners, vertex_count)?;
+        triangles.push(corners);
+    }
+    Ok(TriMesh::new(vertices, triangles))
 }
 
 fn read_stats(r: &mut Reader<'_>) -> Result<Stats, WireError> {
-    let frames_in = r.u64("frames_in")?;
-    let frames_dropped = r.u64("frames_dropped")?;
-    let invalid_pixels = r.u64("invalid_pixels")?;
-    let objects_tracked = r.u64("objects_tracked")?;
-    let meshing_runs = r.u64("meshing_runs")?;
-    let meshes_published = r.u64("meshes_published")?;
-    let bytes_sent = r.u64("bytes_sent")?;
-    let frame_to_publish_p50_ms = r.f32("frame_to_publish_p50_ms")?;
-    check_number("frame_to_publish_p50_ms", frame_to_publish_p50_ms)?;
-    let frame_to_publish_p99_ms = r.f32("frame_to_publish_p99_ms")?;
-    check_number("frame_to_publish_p99_ms", frame_to_publish_p99_ms)?;
-    let stage_count = r.u32("stage_count")? as usize;
+    let mut stats = Stats {
+        monotonic_ns: r.u64("monotonic_ns")?,
+        realtime_ns: r.u64("realtime_ns")?,
+        frames_in: r.u64("frames_in")?,
+        frames_dropped: r.u64("frames_dropped")?,
+        invalid_pixels: r.u64("invalid_pixels")?,
+        malformed_frames: r.u64("malformed_frames")?,
+        source_errors: r.u64("source_errors")?,
+        source_restarts: r.u64("source_restarts")?,
+        objects_tracked: r.u64("objects_tracked")?,
+        objects_born: r.u64("objects_born")?,
+        objects_removed: r.u64("objects_removed")?,
+        meshing_runs: r.u64("meshing_runs")?,
+        meshing_failures: r.u64("meshing_failures")?,
+        shapes_published: r.u64("shapes_published")?,
+        poses_published: r.u64("poses_published")?,
+        bytes_sent: r.u64("bytes_sent")?,
+        clients_connected: r.u64("clients_connected")?,
+        clients_dropped: r.u64("clients_dropped")?,
+        clients_refused: r.u64("clients_refused")?,
+        latency_window: r.u32("latency_window")?,
+        frame_to_publish_p50_ms: r.f32("frame_to_publish_p50_ms")?,
+        frame_to_publish_p99_ms: r.f32("frame_to_publish_p99_ms")?,
+        stage_latencies: Vec::new(),
+    };
+    check_number("frame_to_publish_p50_ms", stats.frame_to_publish_p50_ms)?;
+    check_number("frame_to_publish_p99_ms", stats.frame_to_publish_p99_ms)?;
+    let stage_count = r.u32("stage_count")?;
     // Every stage takes at least STAGE_FIXED_BYTES, which bounds a believable count.
-    let mut stage_latencies =
-        Vec::with_capacity(stage_count.min(r.bytes.len() / STAGE_FIXED_BYTES));
+    r.ensure("stages", u64::from(stage_count) * STAGE_FIXED_BYTES as u64)?;
+    stats.stage_latencies.reserve(stage_count as usize);
     for _ in 0..stage_count {
         let stage = r.text("stage", MAX_NAME_BYTES)?;
         let p50_ms = r.f32("p50_ms")?;
         check_number("p50_ms", p50_ms)?;
         let p99_ms = r.f32("p99_ms")?;
         check_number("p99_ms", p99_ms)?;
-        stage_latencies.push(StageLatency {
+        stats.stage_latencies.push(StageLatency {
             stage,
             p50_ms,
             p99_ms,
         });
     }
-    Ok(Stats {
-        frames_in,
-        frames_dropped,
-        invalid_pixels,
-        objects_tracked,
-        meshing_runs,
-        meshes_published,
-        bytes_sent,
-        stage_latencies,
-        frame_to_publish_p50_ms,
-        frame_to_publish_p99_ms,
-    })
+    Ok(stats)
 }
 
 /// A cursor over one payload; every read names the field it reads, for the error.
@@ -231,7 +338,7 @@ struct Reader<'a> {
     message: &'static str,
 }
 
-impl<'a> Reader<'a> {
+impl Reader<'_> {
     fn array<const N: usize>(&mut self, field: &'static str) -> Result<[u8; N], WireError> {
         match self.bytes.split_first_chunk::<N>() {
             Some((head, rest)) => {
@@ -240,6 +347,10 @@ impl<'a> Reader<'a> {
             }
             None => Err(self.truncated(field, N as u64)),
         }
+    }
+
+    fn u8(&mut self, field: &'static str) -> Result<u8, WireError> {
+        self.array::<1>(field).map(|[byte]| byte)
     }
 
     fn u16(&mut self, field: &'static str) -> Result<u16, WireError> {
@@ -256,6 +367,25 @@ impl<'a> Reader<'a> {
 
     fn f32(&mut self, field: &'static str) -> Result<f32, WireError> {
         self.array(field).map(f32::from_le_bytes)
+    }
+
+    /// Three f32, as they are: the caller checks them.
+    fn vec3(&mut self, field: &'static str) -> Result<Vec3, WireError> {
+        Ok(Vec3::new(
+            self.f32(field)?,
+            self.f32(field)?,
+            self.f32(field)?,
+        ))
+    }
+
+    /// An `encoding` byte: 0 full, 1 compact.
+    fn encoding(&mut self) -> Result<Encoding, WireError> {
+        let value = self.u8("encoding")?;
+        Encoding::from_byte(value).ok_or(WireError::InvalidEnum {
+            message: self.message,
+            field: "encoding",
+            value,
+        })
     }
 
     /// A u16 byte length, then that many bytes of UTF-8.
@@ -280,6 +410,16 @@ impl<'a> Reader<'a> {
                 field,
                 valid_up_to: e.valid_up_to(),
             }),
+        }
+    }
+
+    /// At least `needed` bytes are left: checked before allocating for a count read from the
+    /// wire, so that a hostile count costs nothing.
+    fn ensure(&self, field: &'static str, needed: u64) -> Result<(), WireError> {
+        if needed <= self.bytes.len() as u64 {
+            Ok(())
+        } else {
+            Err(self.truncated(field, needed))
         }
     }
 

@@ -1,7 +1,9 @@
 use crate::message::{Sender, MAX_FRAME_BYTES};
 
 /// Everything that can be wrong with a frame, on either side. After any decode error the peer is
-/// not speaking this protocol correctly: drop the connection (see [`crate::FrameDecoder`]).
+/// not speaking this protocol correctly: drop the connection (see [`crate::FrameDecoder`]). The
+/// encoder returns the same errors for a message it would not be allowed to send, so that what
+/// [`crate::encode`] writes always decodes.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum WireError {
@@ -15,7 +17,7 @@ pub enum WireError {
     EmptyFrame,
 
     #[error(
-        "unknown message kind 0x{kind:02x}: the peer speaks a newer protocol version \
+        "unknown message kind 0x{kind:02x}: the peer speaks another protocol version \
          or is not a tacmesh peer"
     )]
     UnknownKind { kind: u8 },
@@ -54,8 +56,78 @@ pub enum WireError {
     )]
     NonFiniteVertex { vertex: usize, value: f32 },
 
+    #[error("`{field}` of {message} has a non-finite component ({value}): it must be finite")]
+    NonFinite {
+        message: &'static str,
+        field: &'static str,
+        value: f32,
+    },
+
     #[error("`{field}` is {value}, but it must be finite and not negative")]
     InvalidNumber { field: &'static str, value: f32 },
+
+    #[error(
+        "`{field}` of {message} is 0x{value:02x}, but only the bits 0x{defined:02x} are defined"
+    )]
+    InvalidFlags {
+        message: &'static str,
+        field: &'static str,
+        value: u8,
+        defined: u8,
+    },
+
+    #[error(
+        "`kinds` of {message} is 0: it must ask for objects (bit 0), support planes (bit 1) \
+         or both"
+    )]
+    NoKinds { message: &'static str },
+
+    #[error("`{field}` of {message} is {value}, which is not a defined value (0 full, 1 compact)")]
+    InvalidEnum {
+        message: &'static str,
+        field: &'static str,
+        value: u8,
+    },
+
+    #[error(
+        "the rotation of object {object_id} has norm {norm}: it must be a unit quaternion \
+         (norm within 1e-3 of 1)"
+    )]
+    NotUnitQuaternion { object_id: u64, norm: f32 },
+
+    #[error(
+        "object {object_id} was last seen at {last_seen_ns} ns, before its pose time \
+         {pose_time_ns} ns: last seen is never earlier than the pose time"
+    )]
+    TimesOutOfOrder {
+        object_id: u64,
+        pose_time_ns: u64,
+        last_seen_ns: u64,
+    },
+
+    #[error("{message} lists {count} object ids, more than the cap of {max}")]
+    TooManyIds {
+        message: &'static str,
+        count: u64,
+        max: usize,
+    },
+
+    #[error("the compact box's {axis} maximum {max} is below its minimum {min}")]
+    BadBox {
+        axis: &'static str,
+        min: f32,
+        max: f32,
+    },
+
+    #[error(
+        "the shape's vertices span {min} to {max} on {axis}, more than the compact \
+         encoding's box can hold in f32: send it in the full encoding"
+    )]
+    CompactBoxTooLarge {
+        axis: &'static str,
+        min: f32,
+        max: f32,
+    },
 
     #[error("`{field}` of {message} is not UTF-8 (valid up to byte {valid_up_to})")]
     InvalidUtf8 {
@@ -73,7 +145,7 @@ pub enum WireError {
     },
 
     #[error(
-        "the server speaks protocol version {theirs}, this client speaks {ours}: \
+        "the server speaks protocol version {theirs}, this client speaks only version {ours}: \
          use a client and daemon from the same release"
     )]
     VersionMismatch { ours: u16, theirs: u16 },

@@ -1,13 +1,16 @@
-//! The tacmesh wire protocol: the messages the daemon publishes on its Unix socket and the few a
-//! subscriber may send back, as bytes. No I/O here: the daemon and clients own their sockets and
-//! hand bytes to [`encode`] and a [`FrameDecoder`]. The byte layout is specified in
-//! `docs/protocol.md`; the golden-byte tests in this crate pin it down.
+//! The tacmesh wire protocol, version 2: the messages the daemon publishes on its Unix socket
+//! and the few a subscriber may send back, as bytes. No I/O here: the daemon and clients own
+//! their sockets and hand bytes to [`encode`] and a [`FrameDecoder`]. The byte layout is
+//! specified in `docs/protocol.md`; the golden-byte tests in this crate pin it down.
 //!
 //! Entry points:
-//! - [`Message`]: every message, with [`Upsert`], [`Stats`] and their parts.
-//! - [`encode`]: one message to one frame, appended to a buffer.
+//! - [`Message`]: every message, with [`Session`], [`Shape`], [`Pose`], [`Stats`],
+//!   [`Subscribe`] and their parts.
+//! - [`encode`]: one message to one frame, appended to a buffer; a [`Shape`] in the
+//!   [`Encoding`] it names.
 //! - [`FrameDecoder`]: bytes from a stream in, whole messages out.
 //! - [`check_hello`]: what a client does with the first message it receives.
+//! - [`Scene`]: what a client keeps of the stream (the latest shape and pose per object).
 //! - [`WireError`]: everything that can be wrong with a frame, said plainly.
 //!
 //! Framing: every frame is a little-endian `u32` length (of what follows), a `u8` message kind,
@@ -17,6 +20,7 @@ mod decode;
 mod encode;
 mod error;
 mod message;
+mod scene;
 
 #[cfg(test)]
 mod tests;
@@ -25,6 +29,9 @@ pub use decode::FrameDecoder;
 pub use encode::encode;
 pub use error::WireError;
 pub use message::{
-    check_hello, Message, Sender, SimplifyStats, StageLatency, Stats, Upsert, MAX_FRAME_BYTES,
-    MAX_NAME_BYTES, MAX_REASON_BYTES, PROTOCOL_VERSION,
+    check_hello, quantisation_bound_m, Encoding, Kinds, Message, Pose, Sender, Session, Shape,
+    SimplifyStats, StageLatency, Stats, Subscribe, FIRST_SUPPORT_ID, MAX_FRAME_BYTES,
+    MAX_NAME_BYTES, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, PROTOCOL_VERSION, SHAPE_CLOSED,
+    SHAPE_SUPPORT,
 };
+pub use scene::{Scene, SceneChange, SceneObject};

@@ -7,12 +7,14 @@ use crate::error::WireError;
 /// The protocol version this crate speaks, sent in every [`Message::Hello`]. Any change to the
 /// format bumps it: a new message kind (existing layouts untouched, so a newer client can still
 /// read an older server) or a changed layout (see `docs/protocol.md`, "Versioning").
-pub const PROTOCOL_VERSION: u16 = 1;
+/// Version 2 put each object's shape in its own frame with a pose, so that a move is a
+/// [`Pose`] of under 100 bytes instead of a whole mesh.
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// The largest frame either side sends or accepts, counted as the value of the length prefix
 /// (message kind byte plus payload, not the 4 prefix bytes): 64 MiB. A simplified object mesh is
-/// kilobytes; this only guards against a corrupt or hostile length prefix. An [`Upsert`] of
-/// about 2.8 million vertices and as many triangles would reach it.
+/// kilobytes; this only guards against a corrupt or hostile length prefix. A full-encoding
+/// [`Shape`] of about 2.8 million vertices and as many triangles would reach it.
 pub const MAX_FRAME_BYTES: usize = 64 * 1024 * 1024;
 
 /// The longest server name (in [`Message::Hello`]) and stage name (in [`StageLatency`]), in
@@ -21,6 +23,9 @@ pub const MAX_NAME_BYTES: usize = 64;
 
 /// The longest [`Message::Goodbye`] reason, in UTF-8 bytes.
 pub const MAX_REASON_BYTES: usize = 1024;
+
+/// The most object ids a [`Subscribe`] may list.
+pub const MAX_SUBSCRIBE_IDS: usize = 1024;
 
 /// Who sends a message kind. Kinds `0x01..=0x7f` are sent by the server (the daemon), kinds
 /// `0x80..=0xff` by a client; `0x00` is never valid.
@@ -39,25 +44,33 @@ impl std::fmt::Display for Sender {
     }
 }
 
-/// The kind bytes. Never reuse a retired value.
+/// The kind bytes. Never reuse a retired value: `0x02` (version 1's Upsert) and `0x05`
+/// (version 1's Stats) are retired; `0x80` (version 1's empty Subscribe) is still decoded, so
+/// that a server can tell a version-1 client why it is refused.
 pub(crate) mod kind {
     pub const HELLO: u8 = 0x01;
-    pub const UPSERT: u8 = 0x02;
     pub const REMOVE: u8 = 0x03;
     pub const SNAPSHOT_DONE: u8 = 0x04;
-    pub const STATS: u8 = 0x05;
     pub const GOODBYE: u8 = 0x06;
-    pub const SUBSCRIBE: u8 = 0x80;
+    pub const SESSION: u8 = 0x07;
+    pub const SHAPE: u8 = 0x08;
+    pub const POSE: u8 = 0x09;
+    pub const STATS: u8 = 0x0a;
+    pub const SUBSCRIBE_V1: u8 = 0x80;
+    pub const SUBSCRIBE: u8 = 0x81;
 
     /// The kind's name as errors print it, or `None` for a kind this version does not know.
     pub fn name(kind: u8) -> Option<&'static str> {
         Some(match kind {
             HELLO => "Hello",
-            UPSERT => "Upsert",
             REMOVE => "Remove",
             SNAPSHOT_DONE => "SnapshotDone",
-            STATS => "Stats",
             GOODBYE => "Goodbye",
+            SESSION => "Session",
+            SHAPE => "Shape",
+            POSE => "Pose",
+            STATS => "Stats",
+            SUBSCRIBE_V1 => "Subscribe (version 1)",
             SUBSCRIBE => "Subscribe",
             _ => return None,
         })
@@ -74,22 +87,29 @@ pub enum Message {
         /// The daemon's name and version, e.g. `tacmesh 0.1.0`; at most [`MAX_NAME_BYTES`].
         server: String,
     },
-    /// Server → client: a new object, or a new mesh of a known object.
-    Upsert(Upsert),
-    /// Server → client: the object is gone; forget its mesh.
+    /// Server → client: a snapshot begins (after Hello, and after a Subscribe asking for one).
+    Session(Session),
+    /// Server → client: a new object, or a new shape of a known one, with its pose.
+    Shape(Shape),
+    /// Server → client: an object's new pose (its shape unchanged), or that it was seen again.
+    Pose(Pose),
+    /// Server → client: the object is gone; forget it.
     Remove { object_id: u64 },
-    /// Server → client: every object that existed at connect time has been sent as an Upsert.
+    /// Server → client: every object of the snapshot has been sent.
     SnapshotDone,
     /// Server → client: the daemon's counters, sent periodically.
     Stats(Stats),
-    /// Server → client: the daemon is shutting down; the connection closes after this.
+    /// Server → client: the daemon is shutting down or refuses the client; the connection
+    /// closes after this.
     Goodbye {
         /// Why, for a human; at most [`MAX_REASON_BYTES`].
         reason: String,
     },
-    /// Client → server: optional, empty in this version. The daemon sends the snapshot whether or
-    /// not a client sends it.
-    Subscribe,
+    /// Client → server: what the client wants; optional.
+    Subscribe(Subscribe),
+    /// Client → server: version 1's empty Subscribe. A version-2 server answers it with a
+    /// Goodbye saying which versions are spoken, and closes the connection.
+    SubscribeV1,
 }
 
 impl Message {
@@ -118,34 +138,215 @@ impl Message {
     pub(crate) fn kind(&self) -> u8 {
         match self {
             Message::Hello { .. } => kind::HELLO,
-            Message::Upsert(_) => kind::UPSERT,
+            Message::Session(_) => kind::SESSION,
+            Message::Shape(_) => kind::SHAPE,
+            Message::Pose(_) => kind::POSE,
             Message::Remove { .. } => kind::REMOVE,
             Message::SnapshotDone => kind::SNAPSHOT_DONE,
             Message::Stats(_) => kind::STATS,
             Message::Goodbye { .. } => kind::GOODBYE,
-            Message::Subscribe => kind::SUBSCRIBE,
+            Message::Subscribe(_) => kind::SUBSCRIBE,
+            Message::SubscribeV1 => kind::SUBSCRIBE_V1,
         }
     }
 }
 
-/// A new mesh of one object.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Upsert {
-    /// Stable for as long as the daemon tracks the object; never reused within a daemon run.
-    pub object_id: u64,
-    /// Grows with every new mesh of this object; a client keeps the highest it has seen.
-    pub version: u64,
-    /// Capture time, in nanoseconds on the host's `CLOCK_MONOTONIC`
-    /// ([`tacmesh_source::monotonic_now`]), of the newest depth frame that contributed to this
-    /// mesh. A client on the same host subtracts it from its own monotonic now for the age.
-    pub capture_time_ns: u64,
-    /// Vertices in metres (world frame), triangles counter-clockwise seen from outside. Every
-    /// coordinate is finite and every index is below the vertex count.
-    pub mesh: TriMesh,
-    pub report: SimplifyStats,
+/// How a [`Shape`]'s vertices and triangles are laid out on the wire.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// Vertices as three `f32`, triangles as three `u32`: 12 bytes each.
+    #[default]
+    Full,
+    /// Vertices quantised to 16 bits per axis within the shape's bounding box, triangles as
+    /// three `u16` when there are at most 65,536 vertices (else three `u32`): about 9 bytes a
+    /// face instead of 18. Adds at most [`quantisation_bound_m`] of error, which the sent
+    /// `max_residual_m` includes.
+    Compact,
 }
 
-/// What simplification did to produce [`Upsert::mesh`].
+impl Encoding {
+    pub(crate) fn byte(self) -> u8 {
+        match self {
+            Encoding::Full => 0,
+            Encoding::Compact => 1,
+        }
+    }
+
+    pub(crate) fn from_byte(byte: u8) -> Option<Self> {
+        match byte {
+            0 => Some(Encoding::Full),
+            1 => Some(Encoding::Compact),
+            _ => None,
+        }
+    }
+}
+
+/// The largest distance a vertex of the box from `min` to `max` (object frame, metres) reads
+/// back from where it was with [`Encoding::Compact`]: half a step of 1/65,535 of the box's
+/// extent on each axis, plus what a receiver's `f32` arithmetic adds to it (per axis about
+/// three roundings of the step times up to 65,535, 3 · 2⁻²⁴ of the extent, and one of the
+/// coordinate, 2⁻²⁴ of it: negligible for an object whose frame's origin is near it). The
+/// encoder adds it to the residual, so the residual a client reads is a true bound.
+pub fn quantisation_bound_m(min: glam::Vec3, max: glam::Vec3) -> f32 {
+    let extent = (max - min).max(glam::Vec3::ZERO);
+    let rounding = f32::EPSILON / 2.0;
+    0.5 * extent.length() / 65_535.0
+        + rounding * (3.0 * extent.length() + min.abs().max(max.abs()).length())
+}
+
+/// Which objects a client is sent, by kind: [`Kinds::OBJECTS`], [`Kinds::SUPPORTS`] or both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Kinds(pub(crate) u8);
+
+impl Kinds {
+    /// Tracked objects (ids below 2^32).
+    pub const OBJECTS: Kinds = Kinds(1);
+    /// Support planes: tables, floors (ids from 2^32).
+    pub const SUPPORTS: Kinds = Kinds(2);
+    pub const ALL: Kinds = Kinds(3);
+
+    /// The kinds in `bits` (bit 0 objects, bit 1 supports), or `None` for no kind or an
+    /// unknown bit.
+    pub fn from_bits(bits: u8) -> Option<Self> {
+        (bits != 0 && bits & !3 == 0).then_some(Kinds(bits))
+    }
+
+    pub fn bits(self) -> u8 {
+        self.0
+    }
+
+    pub fn contains(self, other: Kinds) -> bool {
+        self.0 & other.0 == other.0
+    }
+}
+
+impl Default for Kinds {
+    fn default() -> Self {
+        Kinds::ALL
+    }
+}
+
+/// The first id of a support plane; objects have ids from 1 below it.
+pub const FIRST_SUPPORT_ID: u64 = 1 << 32;
+
+/// What a client asks for. Every Subscribe replaces the options of the one before.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Subscribe {
+    /// How shapes are to be encoded.
+    pub encoding: Encoding,
+    /// Send a fresh snapshot (Session, a Shape of every object, SnapshotDone) under the new
+    /// options.
+    pub resend: bool,
+    /// At most this many Shapes and Poses a second per object (the latest is sent when the
+    /// interval is over); 0 for no cap. Finite and not negative.
+    pub max_rate_hz: f32,
+    /// Which kinds of object to send.
+    pub kinds: Kinds,
+    /// Only these objects (of those kinds); empty for all. At most [`MAX_SUBSCRIBE_IDS`].
+    pub object_ids: Vec<u64>,
+}
+
+/// A snapshot begins: the server's clocks now, and the options it follows from here on.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Session {
+    /// `CLOCK_MONOTONIC` of the daemon's host when this message was written, nanoseconds.
+    pub monotonic_ns: u64,
+    /// `CLOCK_REALTIME` (nanoseconds since the Unix epoch) at the same moment.
+    pub realtime_ns: u64,
+    /// The options in effect (the defaults until the client sends a Subscribe).
+    pub options: Subscribe,
+}
+
+/// Where an object is and how it moves. The whole payload of a Pose message, and the start of
+/// a Shape's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    pub object_id: u64,
+    /// The version of the shape this pose places.
+    pub shape_version: u64,
+    /// Capture time of the frame this pose was estimated from, `CLOCK_MONOTONIC` nanoseconds;
+    /// never goes backwards for one object.
+    pub pose_time_ns: u64,
+    /// The same instant on `CLOCK_REALTIME` (nanoseconds since the Unix epoch).
+    pub pose_time_realtime_ns: u64,
+    /// Capture time of the newest frame in which the object was seen where this pose puts it
+    /// (`CLOCK_MONOTONIC`); at least `pose_time_ns`, never goes backwards.
+    pub last_seen_ns: u64,
+    /// `world_from_object`: a unit quaternion and a translation in metres.
+    pub rotation: glam::Quat,
+    pub translation: glam::Vec3,
+    /// Velocity of the object frame's origin in the world, m/s.
+    pub linear_velocity: glam::Vec3,
+    /// Angular velocity in the world frame, rad/s (axis × rate).
+    pub angular_velocity: glam::Vec3,
+}
+
+impl Pose {
+    /// `world_from_object` as an affine transform.
+    pub fn world_from_object(&self) -> glam::Affine3A {
+        glam::Affine3A::from_rotation_translation(self.rotation, self.translation)
+    }
+}
+
+/// A shape flag: the mesh is closed (every edge shared by two triangles), wound
+/// counter-clockwise seen from outside.
+pub const SHAPE_CLOSED: u8 = 1;
+/// A shape flag: the object is a support plane (a table, a floor), its fan facing the side the
+/// sensor saw it from.
+pub const SHAPE_SUPPORT: u8 = 2;
+
+/// A new shape of one object (in its own frame) and the pose that places it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shape {
+    /// `pose.shape_version` is this shape's version; it grows with every new shape.
+    pub pose: Pose,
+    /// Capture time of the newest frame fused into the shape, `CLOCK_MONOTONIC` nanoseconds;
+    /// never goes backwards for one object.
+    pub shape_time_ns: u64,
+    pub shape_time_realtime_ns: u64,
+    /// [`SHAPE_CLOSED`], [`SHAPE_SUPPORT`].
+    pub flags: u8,
+    /// Vertices in metres in the object's frame. Every coordinate is finite and every index is
+    /// below the vertex count.
+    pub mesh: TriMesh,
+    /// What simplification did; its residual includes the quantisation of a compact encoding.
+    pub report: SimplifyStats,
+    /// How the shape is (to be) laid out on the wire.
+    pub encoding: Encoding,
+}
+
+impl Shape {
+    /// The mesh placed in the world by its pose.
+    pub fn world_mesh(&self) -> TriMesh {
+        let pose = self.pose.world_from_object();
+        TriMesh::new(
+            self.mesh
+                .vertices
+                .iter()
+                .map(|&v| pose.transform_point3(v))
+                .collect(),
+            self.mesh.triangles.clone(),
+        )
+    }
+
+    pub fn object_id(&self) -> u64 {
+        self.pose.object_id
+    }
+
+    pub fn version(&self) -> u64 {
+        self.pose.shape_version
+    }
+
+    pub fn is_closed(&self) -> bool {
+        self.flags & SHAPE_CLOSED != 0
+    }
+
+    pub fn is_support(&self) -> bool {
+        self.flags & SHAPE_SUPPORT != 0
+    }
+}
+
+/// What simplification did to produce a shape's mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimplifyStats {
     /// Triangles before simplification (the marching-cubes mesh).
@@ -160,18 +361,33 @@ pub struct SimplifyStats {
 /// The daemon's counters since it started, and its latencies over a recent window.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Stats {
+    /// `CLOCK_MONOTONIC` and `CLOCK_REALTIME` when the stats were taken, nanoseconds.
+    pub monotonic_ns: u64,
+    pub realtime_ns: u64,
     pub frames_in: u64,
     pub frames_dropped: u64,
     pub invalid_pixels: u64,
+    pub malformed_frames: u64,
+    pub source_errors: u64,
+    pub source_restarts: u64,
     pub objects_tracked: u64,
+    pub objects_born: u64,
+    pub objects_removed: u64,
     pub meshing_runs: u64,
-    pub meshes_published: u64,
+    pub meshing_failures: u64,
+    pub shapes_published: u64,
+    pub poses_published: u64,
     pub bytes_sent: u64,
-    /// Per pipeline stage (deproject, segment, integrate, mesh, simplify, publish, …).
-    pub stage_latencies: Vec<StageLatency>,
-    /// From a frame's capture to the publication of a mesh it contributed to, milliseconds.
+    pub clients_connected: u64,
+    pub clients_dropped: u64,
+    pub clients_refused: u64,
+    /// Samples in each latency window.
+    pub latency_window: u32,
+    /// From a frame's capture to the publication of a shape or pose it contributed to, ms.
     pub frame_to_publish_p50_ms: f32,
     pub frame_to_publish_p99_ms: f32,
+    /// Per pipeline stage (deproject, segment, integrate, mesh, simplify, publish, …).
+    pub stage_latencies: Vec<StageLatency>,
 }
 
 /// The latency of one pipeline stage. Latencies are finite and not negative; a stage with no

@@ -7,9 +7,13 @@ use std::os::unix::net::UnixStream;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use tacmesh_protocol::{encode, FrameDecoder, Message, Sender};
+use tacmesh_protocol::{
+    encode, FrameDecoder, Kinds, Message, Sender, Session, Subscribe, FIRST_SUPPORT_ID,
+};
+
+use tacmesh_source::{monotonic_now, realtime_now_ns};
 
 use crate::{lock, Shared};
 
@@ -19,17 +23,40 @@ const GOODBYE_WRITE_TIMEOUT: Duration = Duration::from_millis(500);
 /// The send buffer asked for when the daemon says Goodbye (see [`Client::say_goodbye`]).
 const SHUTDOWN_SEND_BUFFER_BYTES: usize = 4 * 1024 * 1024;
 
-/// A client has nothing legitimate to send that is longer than this (Subscribe is 5 bytes), so
-/// more unparsed bytes than this mean it is not speaking the protocol.
+/// A client has nothing legitimate to send that is longer than this (a Subscribe with the
+/// most ids is 8 KiB), so more unparsed bytes than this mean it is not speaking the protocol.
 const CLIENT_BUFFER_CAP: usize = 64 * 1024;
 
 /// The frame of SnapshotDone: `01 00 00 00 04`.
 const SNAPSHOT_DONE: [u8; 5] = [1, 0, 0, 0, 4];
 
-/// An encoded Upsert and its version.
-pub(crate) struct Frame {
+/// An object's shape, encoded both ways (a subscriber asks for one), and its version.
+pub(crate) struct ShapeFrames {
     pub(crate) version: u64,
-    pub(crate) bytes: Vec<u8>,
+    pub(crate) full: Vec<u8>,
+    pub(crate) compact: Vec<u8>,
+}
+
+impl ShapeFrames {
+    fn bytes(&self, encoding: tacmesh_protocol::Encoding) -> &[u8] {
+        match encoding {
+            tacmesh_protocol::Encoding::Full => &self.full,
+            tacmesh_protocol::Encoding::Compact => &self.compact,
+        }
+    }
+}
+
+/// What is current of one object: its shape, and a pose newer than the one inside the shape.
+#[derive(Clone, Default)]
+pub(crate) struct ObjectFrames {
+    pub(crate) shape: Option<Arc<ShapeFrames>>,
+    pub(crate) pose: Option<Arc<Vec<u8>>>,
+}
+
+impl ObjectFrames {
+    fn is_empty(&self) -> bool {
+        self.shape.is_none() && self.pose.is_none()
+    }
 }
 
 /// How a subscriber leaves, for the one log line.
@@ -45,9 +72,11 @@ pub(crate) enum Retire {
 /// What is waiting to be written to one subscriber. Bounded by the number of objects.
 #[derive(Default)]
 struct Updates {
-    /// The latest unsent mesh of each object.
-    upserts: BTreeMap<u64, Arc<Frame>>,
-    /// Unsent removes; an id is never in both maps.
+    /// A snapshot is to be written first: Session, `objects`, SnapshotDone.
+    snapshot: bool,
+    /// The latest unsent shape and pose of each object.
+    objects: BTreeMap<u64, ObjectFrames>,
+    /// Unsent removes; an id is never in both.
     removes: BTreeSet<u64>,
     /// The latest unsent stats frame.
     stats: Option<Arc<Vec<u8>>>,
@@ -55,14 +84,38 @@ struct Updates {
 
 impl Updates {
     fn is_empty(&self) -> bool {
-        self.upserts.is_empty() && self.removes.is_empty() && self.stats.is_none()
+        !self.snapshot && self.objects.is_empty() && self.removes.is_empty() && self.stats.is_none()
     }
 }
 
 struct Pending {
     updates: Updates,
+    options: Subscribe,
     goodbye: Option<Arc<Vec<u8>>>,
     closed: bool,
+}
+
+/// Whether `options` let an object through to the subscriber.
+fn passes(options: &Subscribe, object_id: u64) -> bool {
+    let kind = if object_id >= FIRST_SUPPORT_ID {
+        Kinds::SUPPORTS
+    } else {
+        Kinds::OBJECTS
+    };
+    options.kinds.contains(kind)
+        && (options.object_ids.is_empty() || options.object_ids.contains(&object_id))
+}
+
+/// The objects of `current` that `options` let through.
+fn filtered(
+    current: &BTreeMap<u64, ObjectFrames>,
+    options: &Subscribe,
+) -> BTreeMap<u64, ObjectFrames> {
+    current
+        .iter()
+        .filter(|(&id, _)| passes(options, id))
+        .map(|(&id, frames)| (id, frames.clone()))
+        .collect()
 }
 
 pub(crate) struct Client {
@@ -76,15 +129,18 @@ pub(crate) struct Client {
 }
 
 impl Client {
-    pub(crate) fn new(id: u64, stream: UnixStream, snapshot: BTreeMap<u64, Arc<Frame>>) -> Self {
+    pub(crate) fn new(id: u64, stream: UnixStream, current: &BTreeMap<u64, ObjectFrames>) -> Self {
+        let options = Subscribe::default();
         Self {
             id,
             stream,
             pending: Mutex::new(Pending {
                 updates: Updates {
-                    upserts: snapshot,
+                    snapshot: true,
+                    objects: filtered(current, &options),
                     ..Updates::default()
                 },
+                options,
                 goodbye: None,
                 closed: false,
             }),
@@ -94,17 +150,41 @@ impl Client {
         }
     }
 
-    pub(crate) fn queue_upsert(&self, object_id: u64, frame: &Arc<Frame>) {
+    /// A new shape of an object (it replaces an unsent shape and pose of it).
+    pub(crate) fn queue_shape(&self, object_id: u64, frames: &Arc<ShapeFrames>) {
         let mut pending = lock(&self.pending);
+        if !passes(&pending.options, object_id) {
+            return;
+        }
         pending.updates.removes.remove(&object_id);
-        pending.updates.upserts.insert(object_id, Arc::clone(frame));
+        pending.updates.objects.insert(
+            object_id,
+            ObjectFrames {
+                shape: Some(Arc::clone(frames)),
+                pose: None,
+            },
+        );
+        drop(pending);
+        self.wake.notify_one();
+    }
+
+    /// A new pose of an object (it replaces an unsent pose, and goes after an unsent shape).
+    pub(crate) fn queue_pose(&self, object_id: u64, frame: &Arc<Vec<u8>>) {
+        let mut pending = lock(&self.pending);
+        if !passes(&pending.options, object_id) {
+            return;
+        }
+        pending.updates.objects.entry(object_id).or_default().pose = Some(Arc::clone(frame));
         drop(pending);
         self.wake.notify_one();
     }
 
     pub(crate) fn queue_remove(&self, object_id: u64) {
         let mut pending = lock(&self.pending);
-        pending.updates.upserts.remove(&object_id);
+        if !passes(&pending.options, object_id) {
+            return;
+        }
+        pending.updates.objects.remove(&object_id);
         pending.updates.removes.insert(object_id);
         drop(pending);
         self.wake.notify_one();
@@ -112,6 +192,41 @@ impl Client {
 
     pub(crate) fn queue_stats(&self, frame: &Arc<Vec<u8>>) {
         lock(&self.pending).updates.stats = Some(Arc::clone(frame));
+        self.wake.notify_one();
+    }
+
+    /// Takes the subscriber's new options; with `resend`, what is pending gives way to a
+    /// snapshot of `current` under them. Called with the publisher's state locked (so that no
+    /// update can come between the snapshot and the next update).
+    fn resubscribe(&self, options: Subscribe, current: &BTreeMap<u64, ObjectFrames>) {
+        let mut pending = lock(&self.pending);
+        if options.resend {
+            let stats = pending.updates.stats.take();
+            pending.updates = Updates {
+                snapshot: true,
+                objects: filtered(current, &options),
+                stats,
+                ..Updates::default()
+            };
+        } else {
+            let Updates {
+                objects, removes, ..
+            } = &mut pending.updates;
+            objects.retain(|&id, _| passes(&options, id));
+            removes.retain(|&id| passes(&options, id));
+        }
+        pending.options = options;
+        drop(pending);
+        self.wake.notify_one();
+    }
+
+    /// The subscriber is told `frame` (a Goodbye) instead of anything still pending, and let go.
+    fn dismiss(&self, frame: Vec<u8>) {
+        let mut pending = lock(&self.pending);
+        pending.updates = Updates::default();
+        pending.goodbye = Some(Arc::new(frame));
+        drop(pending);
+        self.leaving.store(true, Ordering::Relaxed);
         self.wake.notify_one();
     }
 
@@ -161,7 +276,7 @@ pub(crate) fn start_threads(shared: &Arc<Shared>, client: &Arc<Client>) -> std::
     let reader = std::thread::Builder::new()
         .name(format!("publish-r{}", client.id))
         .spawn(move || {
-            if let Some(how) = read_loop(&reader_client) {
+            if let Some(how) = read_loop(&reader_shared, &reader_client) {
                 reader_shared.retire(&reader_client, how);
             }
         })?;
@@ -169,14 +284,59 @@ pub(crate) fn start_threads(shared: &Arc<Shared>, client: &Arc<Client>) -> std::
     Ok(())
 }
 
+/// A batch the writer took, with the options it is to be written under.
+struct Batch {
+    updates: Updates,
+    options: Subscribe,
+}
+
 enum Next {
-    Updates(Updates),
+    Updates(Batch),
     /// The Goodbye, and what was still pending when it came (flushed first).
-    Goodbye(Arc<Vec<u8>>, Updates),
+    Goodbye(Arc<Vec<u8>>, Batch),
     Closed,
 }
 
-/// Writes Hello, the snapshot, SnapshotDone, then updates as they come; returns how it ended.
+/// When each object was last written to this subscriber, for its rate cap.
+type LastSent = std::collections::HashMap<u64, Instant>;
+
+/// Takes what may be written now: everything, except the shapes and poses of objects written
+/// less than 1/`max_rate_hz` ago (a snapshot takes everything). Returns the batch and when
+/// the earliest held-back object may go.
+fn take_due(
+    pending: &mut Pending,
+    last_sent: &LastSent,
+    now: Instant,
+) -> (Updates, Option<Instant>) {
+    let rate = pending.options.max_rate_hz;
+    if pending.updates.snapshot || rate <= 0.0 {
+        return (std::mem::take(&mut pending.updates), None);
+    }
+    let interval = Duration::from_secs_f32(1.0 / rate);
+    let mut next_due: Option<Instant> = None;
+    let mut due = BTreeMap::new();
+    pending.updates.objects.retain(|&id, frames| {
+        match last_sent.get(&id).map(|&at| at + interval) {
+            Some(at) if at > now => {
+                next_due = Some(next_due.map_or(at, |n| n.min(at)));
+                true
+            }
+            _ => {
+                due.insert(id, std::mem::take(frames));
+                false
+            }
+        }
+    });
+    let updates = Updates {
+        snapshot: false,
+        objects: due,
+        removes: std::mem::take(&mut pending.updates.removes),
+        stats: pending.updates.stats.take(),
+    };
+    (updates, next_due)
+}
+
+/// Writes Hello, the snapshot, then updates as they come; returns how it ended.
 fn write_loop(shared: &Shared, client: &Client) -> Retire {
     match write_all_frames(shared, client) {
         Ok(()) => Retire::Quiet,
@@ -210,7 +370,7 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
         Ok(())
     };
     send(&shared.hello)?;
-    let mut snapshot_sent = false;
+    let mut last_sent = LastSent::new();
     loop {
         let next = {
             let mut pending = lock(&client.pending);
@@ -219,67 +379,105 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
                     break Next::Closed;
                 }
                 if let Some(goodbye) = pending.goodbye.take() {
-                    break Next::Goodbye(goodbye, std::mem::take(&mut pending.updates));
+                    let batch = Batch {
+                        updates: std::mem::take(&mut pending.updates),
+                        options: pending.options.clone(),
+                    };
+                    break Next::Goodbye(goodbye, batch);
                 }
-                // The first batch (the snapshot) is taken even when empty, for SnapshotDone.
-                if !snapshot_sent || !pending.updates.is_empty() {
-                    break Next::Updates(std::mem::take(&mut pending.updates));
+                let now = Instant::now();
+                let (updates, next_due) = take_due(&mut pending, &last_sent, now);
+                if !updates.is_empty() {
+                    break Next::Updates(Batch {
+                        updates,
+                        options: pending.options.clone(),
+                    });
                 }
-                pending = client
-                    .wake
-                    .wait(pending)
-                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                pending = match next_due {
+                    Some(at) => {
+                        client
+                            .wake
+                            .wait_timeout(pending, at.saturating_duration_since(now))
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .0
+                    }
+                    None => client
+                        .wake
+                        .wait(pending)
+                        .unwrap_or_else(std::sync::PoisonError::into_inner),
+                };
             }
         };
         match next {
             Next::Closed => return Ok(()),
-            Next::Goodbye(frame, updates) => {
+            Next::Goodbye(frame, batch) => {
                 // What was queued before the Goodbye is sent first (bounded: each write by
                 // GOODBYE_WRITE_TIMEOUT, the whole by the publisher's grace, after which the
                 // socket is closed under the writer).
                 client
                     .stream
                     .set_write_timeout(Some(GOODBYE_WRITE_TIMEOUT))?;
-                send_updates(&send, shared, client, &updates, &mut snapshot_sent)?;
+                send_batch(&send, shared, client, &batch, &mut last_sent)?;
                 send(&frame)?;
                 let _ = client.stream.shutdown(Shutdown::Both);
                 return Ok(());
             }
-            Next::Updates(updates) => {
-                send_updates(&send, shared, client, &updates, &mut snapshot_sent)?;
+            Next::Updates(batch) => {
+                send_batch(&send, shared, client, &batch, &mut last_sent)?;
             }
         }
     }
 }
 
-/// Writes one batch: its Upserts, SnapshotDone after the first batch, its Removes and Stats.
-fn send_updates(
+/// Writes one batch: a Session first if it is a snapshot, the shapes and poses (then
+/// SnapshotDone for a snapshot), the removes and the stats.
+fn send_batch(
     send: &impl Fn(&[u8]) -> std::io::Result<()>,
     shared: &Shared,
     client: &Client,
-    updates: &Updates,
-    snapshot_sent: &mut bool,
+    batch: &Batch,
+    last_sent: &mut LastSent,
 ) -> std::io::Result<()> {
-    for (object_id, frame) in &updates.upserts {
-        send(&frame.bytes)?;
-        shared.meshes_published.fetch_add(1, Ordering::Relaxed);
-        tracing::trace!(
-            client = client.id,
-            object_id,
-            version = frame.version,
-            "sent mesh"
-        );
-    }
-    if !*snapshot_sent {
-        send(&SNAPSHOT_DONE)?;
-        *snapshot_sent = true;
-    }
+    let Batch { updates, options } = batch;
     let mut bytes = Vec::new();
+    let to_io = |error: tacmesh_protocol::WireError| std::io::Error::other(error.to_string());
+    if updates.snapshot {
+        let session = Session {
+            monotonic_ns: monotonic_now().as_nanos() as u64,
+            realtime_ns: realtime_now_ns(),
+            options: options.clone(),
+        };
+        encode(&Message::Session(session), &mut bytes).map_err(to_io)?;
+        send(&bytes)?;
+    }
+    let now = Instant::now();
+    for (&object_id, frames) in &updates.objects {
+        if let Some(shape) = &frames.shape {
+            send(shape.bytes(options.encoding))?;
+            shared.shapes_published.fetch_add(1, Ordering::Relaxed);
+            tracing::trace!(
+                client = client.id,
+                object_id,
+                version = shape.version,
+                "sent shape"
+            );
+        }
+        if let Some(pose) = &frames.pose {
+            send(pose)?;
+            shared.poses_published.fetch_add(1, Ordering::Relaxed);
+        }
+        if !frames.is_empty() {
+            last_sent.insert(object_id, now);
+        }
+    }
+    if updates.snapshot {
+        send(&SNAPSHOT_DONE)?;
+    }
     for &object_id in &updates.removes {
         bytes.clear();
-        encode(&Message::Remove { object_id }, &mut bytes)
-            .map_err(|error| std::io::Error::other(error.to_string()))?;
+        encode(&Message::Remove { object_id }, &mut bytes).map_err(to_io)?;
         send(&bytes)?;
+        last_sent.remove(&object_id);
     }
     if let Some(stats) = &updates.stats {
         send(stats)?;
@@ -288,8 +486,9 @@ fn send_updates(
 }
 
 /// Reads what the subscriber sends until it disconnects or misbehaves; returns how it ended, or
-/// `None` when the subscriber only stopped sending (the end of its input at a frame boundary).
-fn read_loop(client: &Client) -> Option<Retire> {
+/// `None` when the subscriber only stopped sending (the end of its input at a frame boundary)
+/// or was told to go.
+fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
     let mut decoder = FrameDecoder::new(Sender::Client);
     let mut buffer = [0u8; 4096];
     loop {
@@ -313,8 +512,14 @@ fn read_loop(client: &Client) -> Option<Retire> {
         decoder.push(&buffer[..read]);
         loop {
             match decoder.next_message() {
-                Ok(Some(Message::Subscribe)) => {
-                    tracing::debug!(client = client.id, "subscriber sent Subscribe");
+                Ok(Some(Message::Subscribe(options))) => {
+                    tracing::debug!(client = client.id, ?options, "subscriber sent Subscribe");
+                    let state = lock(&shared.state);
+                    client.resubscribe(options, &state.objects);
+                }
+                Ok(Some(Message::SubscribeV1)) => {
+                    refuse_version_1(shared, client);
+                    return None;
                 }
                 Ok(Some(other)) => {
                     // The decoder refuses server kinds already; this is for kinds added later.
@@ -335,5 +540,26 @@ fn read_loop(client: &Client) -> Option<Retire> {
                 decoder.buffered_len()
             )));
         }
+    }
+}
+
+/// A version-1 client sent its Subscribe: it is told in a Goodbye that this server speaks
+/// version 2 (it may not have checked the Hello) and let go; counted as dropped.
+fn refuse_version_1(shared: &Shared, client: &Client) {
+    let reason = format!(
+        "this daemon speaks tacmesh protocol version {}; the client sent a version-1 Subscribe: \
+         use a client from the same release",
+        tacmesh_protocol::PROTOCOL_VERSION
+    );
+    shared.clients_dropped.fetch_add(1, Ordering::Relaxed);
+    tracing::warn!(
+        client = client.id,
+        "dropping subscriber: it speaks protocol version 1"
+    );
+    let mut frame = Vec::new();
+    if encode(&Message::Goodbye { reason }, &mut frame).is_ok() {
+        client.dismiss(frame);
+    } else {
+        client.close();
     }
 }

@@ -1,21 +1,24 @@
-//! The publish stage: serves the current mesh of every object to subscribers on a Unix stream
-//! socket, in the wire format of `tacmesh-protocol` (`docs/protocol.md`).
+//! The publish stage: serves the current shape and pose of every object to subscribers on a
+//! Unix stream socket, in the wire format of `tacmesh-protocol` (`docs/protocol.md`).
 //!
 //! Entry points:
 //! - [`Publisher::bind`]: claim the socket path (refusing a live daemon or a non-socket, removing
 //!   a stale socket), set its mode, and start accepting subscribers.
-//! - [`Publisher::upsert`], [`Publisher::remove`], [`Publisher::stats`]: called by the pipeline;
-//!   they never wait for a subscriber.
+//! - [`Publisher::shape`], [`Publisher::pose`], [`Publisher::remove`], [`Publisher::stats`]:
+//!   called by the pipeline; they never wait for a subscriber.
 //! - [`Publisher::counters`], [`Publisher::shutdown`].
 //!
-//! Every subscriber gets `Hello`, an `Upsert` of every current object, `SnapshotDone`, then live
-//! updates. Each subscriber has its own writer thread and a pending state that holds at most the
-//! latest unsent mesh of each object, the unsent removes and the latest stats: a slow subscriber
-//! skips versions, and its memory stays bounded by the number of objects. Its socket's kernel
-//! buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can be stale there when it reads
-//! again. A subscriber that reads nothing for [`WRITE_TIMEOUT`] is dropped; one that only closes
-//! its sending side goes on being served. A reader thread per subscriber decodes what it sends;
-//! anything but a well-formed `Subscribe` gets it dropped with one WARN line. Blocking std
+//! Every subscriber gets `Hello`, a snapshot (`Session`, a `Shape` of every current object,
+//! `SnapshotDone`), then live updates, and a new snapshot when its `Subscribe` asks for one.
+//! Each subscriber has its own writer thread and a pending state that holds at most the latest
+//! unsent shape and pose of each object, the unsent removes and the latest stats: a slow
+//! subscriber skips versions, and its memory stays bounded by the number of objects. Each
+//! subscriber's options (encoding, rate cap per object, which objects) are applied by its
+//! writer. Its socket's kernel buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can
+//! be stale there when it reads again. A subscriber that reads nothing for [`WRITE_TIMEOUT`] is
+//! dropped; one that only closes its sending side goes on being served. A reader thread per
+//! subscriber decodes what it sends; anything but a well-formed `Subscribe` gets it dropped
+//! with one WARN line (a version-1 Subscribe with a Goodbye saying why first). Blocking std
 //! threads only.
 
 mod bind;
@@ -32,9 +35,11 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use tacmesh_protocol::{encode, Message, Stats, Upsert, WireError, MAX_REASON_BYTES};
+use tacmesh_protocol::{
+    encode, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
+};
 
-use crate::client::{Client, Frame, Retire};
+use crate::client::{Client, ObjectFrames, Retire, ShapeFrames};
 
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
@@ -121,8 +126,10 @@ pub struct PublisherCounters {
     /// Connections refused because the peer's credentials are not in
     /// [`PublisherConfig::allowed_peers`] (or could not be read).
     pub clients_refused: u64,
-    /// Upsert frames written to subscribers (snapshot and live), summed over subscribers.
-    pub meshes_published: u64,
+    /// Shape frames written to subscribers (snapshots and live), summed over subscribers.
+    pub shapes_published: u64,
+    /// Pose frames written to subscribers, summed over subscribers.
+    pub poses_published: u64,
     /// Bytes written to all subscribers.
     pub bytes_sent: u64,
 }
@@ -216,8 +223,23 @@ pub enum PublishError {
         current: u64,
     },
 
-    #[error("the mesh of object {object_id} cannot be published: {cause}")]
-    EncodeUpsert { object_id: u64, cause: WireError },
+    #[error("the shape of object {object_id} cannot be published: {cause}")]
+    EncodeShape { object_id: u64, cause: WireError },
+
+    #[error("the pose of object {object_id} cannot be published: {cause}")]
+    EncodePose { object_id: u64, cause: WireError },
+
+    #[error(
+        "a pose of object {object_id} names shape version {version}, but {}; publish the \
+         shape first",
+        match current { Some(v) => format!("its published shape is version {v}"),
+                        None => "it has no published shape".to_owned() }
+    )]
+    PoseForUnknownShape {
+        object_id: u64,
+        version: u64,
+        current: Option<u64>,
+    },
 
     #[error("the stats cannot be published: {cause}")]
     EncodeStats { cause: WireError },
@@ -233,15 +255,17 @@ pub(crate) struct Shared {
     allowed_peers: Option<AllowedPeers>,
     clients_dropped: AtomicU64,
     clients_refused: AtomicU64,
-    meshes_published: AtomicU64,
+    shapes_published: AtomicU64,
+    poses_published: AtomicU64,
     bytes_sent: AtomicU64,
 }
 
 /// Lock order: `State` before any `Client::pending`.
 #[derive(Default)]
 struct State {
-    /// The latest encoded Upsert of every current object: the snapshot a new subscriber gets.
-    objects: BTreeMap<u64, Arc<Frame>>,
+    /// The latest encoded shape and pose of every current object: the snapshot a new
+    /// subscriber gets.
+    objects: BTreeMap<u64, ObjectFrames>,
     clients: BTreeMap<u64, Arc<Client>>,
     next_client: u64,
     /// Set by shutdown: no new subscribers.
@@ -304,7 +328,8 @@ impl Publisher {
             allowed_peers: config.allowed_peers.clone(),
             clients_dropped: AtomicU64::new(0),
             clients_refused: AtomicU64::new(0),
-            meshes_published: AtomicU64::new(0),
+            shapes_published: AtomicU64::new(0),
+            poses_published: AtomicU64::new(0),
             bytes_sent: AtomicU64::new(0),
         });
         let accept_shared = Arc::clone(&shared);
@@ -338,15 +363,17 @@ impl Publisher {
         &self.path
     }
 
-    /// Publishes a new mesh of an object (new or known). Returns at once: each subscriber's
-    /// writer sends it when it can, and a newer mesh of the same object replaces an unsent one.
+    /// Publishes a new shape of an object (new or known) with its pose. Returns at once: each
+    /// subscriber's writer sends it when it can, in the encoding that subscriber asked for, and
+    /// a newer shape of the same object replaces an unsent shape and pose.
     ///
-    /// Errors: [`PublishError::VersionNotNewer`] if `upsert.version` is not above the version
-    /// last published for this object (nothing is published), [`PublishError::EncodeUpsert`]
-    /// for a mesh the wire format refuses (non-finite vertex, bad index, over the frame cap).
-    pub fn upsert(&self, upsert: Upsert) -> Result<(), PublishError> {
-        let object_id = upsert.object_id;
-        let version = upsert.version;
+    /// Errors: [`PublishError::VersionNotNewer`] if the shape's version is not above the
+    /// version last published for this object (nothing is published),
+    /// [`PublishError::EncodeShape`] for a shape the wire format refuses (non-finite vertex,
+    /// bad index, not a unit quaternion, over the frame cap).
+    pub fn shape(&self, shape: Shape) -> Result<(), PublishError> {
+        let object_id = shape.object_id();
+        let version = shape.version();
         if let Some(current) = self.current_version(object_id) {
             if version <= current {
                 return Err(PublishError::VersionNotNewer {
@@ -356,17 +383,24 @@ impl Publisher {
                 });
             }
         }
-        let mut bytes = Vec::new();
-        encode(&Message::Upsert(upsert), &mut bytes).map_err(|source| {
-            PublishError::EncodeUpsert {
-                object_id,
-                cause: source,
-            }
-        })?;
-        let frame = Arc::new(Frame { version, bytes });
+        let encode_as = |encoding: Encoding| {
+            let mut bytes = Vec::new();
+            let shape = Shape {
+                encoding,
+                ..shape.clone()
+            };
+            encode(&Message::Shape(shape), &mut bytes)
+                .map(|()| bytes)
+                .map_err(|cause| PublishError::EncodeShape { object_id, cause })
+        };
+        let frames = Arc::new(ShapeFrames {
+            version,
+            full: encode_as(Encoding::Full)?,
+            compact: encode_as(Encoding::Compact)?,
+        });
 
         let mut state = lock(&self.shared.state);
-        if let Some(current) = state.objects.get(&object_id) {
+        if let Some(current) = state.objects.get(&object_id).and_then(|o| o.shape.as_ref()) {
             // Checked again under the lock in case two threads publish the same object.
             if version <= current.version {
                 return Err(PublishError::VersionNotNewer {
@@ -376,9 +410,49 @@ impl Publisher {
                 });
             }
         }
-        state.objects.insert(object_id, Arc::clone(&frame));
+        state.objects.insert(
+            object_id,
+            ObjectFrames {
+                shape: Some(Arc::clone(&frames)),
+                pose: None,
+            },
+        );
         for client in state.clients.values() {
-            client.queue_upsert(object_id, &frame);
+            client.queue_shape(object_id, &frames);
+        }
+        Ok(())
+    }
+
+    /// Publishes a new pose of an object whose shape is published (a rigid move, or that it
+    /// was seen again). Returns at once; a newer pose replaces an unsent one.
+    ///
+    /// Errors: [`PublishError::PoseForUnknownShape`] if `pose.shape_version` is not the
+    /// version of the object's published shape, [`PublishError::EncodePose`] for a pose the
+    /// wire format refuses.
+    pub fn pose(&self, pose: Pose) -> Result<(), PublishError> {
+        let object_id = pose.object_id;
+        let mut bytes = Vec::new();
+        encode(&Message::Pose(pose), &mut bytes)
+            .map_err(|cause| PublishError::EncodePose { object_id, cause })?;
+        let frame = Arc::new(bytes);
+        let mut state = lock(&self.shared.state);
+        let current = state
+            .objects
+            .get(&object_id)
+            .and_then(|o| o.shape.as_ref())
+            .map(|shape| shape.version);
+        if current != Some(pose.shape_version) {
+            return Err(PublishError::PoseForUnknownShape {
+                object_id,
+                version: pose.shape_version,
+                current,
+            });
+        }
+        if let Some(object) = state.objects.get_mut(&object_id) {
+            object.pose = Some(Arc::clone(&frame));
+        }
+        for client in state.clients.values() {
+            client.queue_pose(object_id, &frame);
         }
         Ok(())
     }
@@ -417,7 +491,8 @@ impl Publisher {
             clients_connected,
             clients_dropped: self.shared.clients_dropped.load(Ordering::Relaxed),
             clients_refused: self.shared.clients_refused.load(Ordering::Relaxed),
-            meshes_published: self.shared.meshes_published.load(Ordering::Relaxed),
+            shapes_published: self.shared.shapes_published.load(Ordering::Relaxed),
+            poses_published: self.shared.poses_published.load(Ordering::Relaxed),
             bytes_sent: self.shared.bytes_sent.load(Ordering::Relaxed),
         }
     }
@@ -488,7 +563,8 @@ impl Publisher {
         lock(&self.shared.state)
             .objects
             .get(&object_id)
-            .map(|frame| frame.version)
+            .and_then(|object| object.shape.as_ref())
+            .map(|shape| shape.version)
     }
 }
 
@@ -567,7 +643,7 @@ impl Shared {
         }
         let id = state.next_client;
         state.next_client += 1;
-        let client = Arc::new(Client::new(id, stream, state.objects.clone()));
+        let client = Arc::new(Client::new(id, stream, &state.objects));
         state.clients.insert(id, Arc::clone(&client));
         // Threads are started under the lock so that shutdown finds their handles; they take
         // the state lock only when they end.

@@ -6,9 +6,10 @@ use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use tacmesh_protocol::{
-    FrameDecoder, Message, Sender, SimplifyStats, Stats, Upsert, PROTOCOL_VERSION,
+    Encoding, FrameDecoder, Kinds, Message, Pose, Sender, Shape, SimplifyStats, Stats, Subscribe,
+    PROTOCOL_VERSION,
 };
 use tacmesh_source::TriMesh;
 
@@ -38,17 +39,33 @@ fn mesh(triangles: usize) -> TriMesh {
     TriMesh::new(vertices, tris)
 }
 
-fn upsert(object_id: u64, version: u64, triangles: usize) -> Upsert {
-    Upsert {
+fn pose(object_id: u64, shape_version: u64, time: u64) -> Pose {
+    Pose {
         object_id,
-        version,
-        capture_time_ns: version * 1000,
+        shape_version,
+        pose_time_ns: time,
+        pose_time_realtime_ns: time,
+        last_seen_ns: time,
+        rotation: Quat::IDENTITY,
+        translation: Vec3::new(time as f32 * 1e-6, 0.0, 1.0),
+        linear_velocity: Vec3::ZERO,
+        angular_velocity: Vec3::ZERO,
+    }
+}
+
+fn shape(object_id: u64, version: u64, triangles: usize) -> Shape {
+    Shape {
+        pose: pose(object_id, version, version * 1000),
+        shape_time_ns: version * 1000,
+        shape_time_realtime_ns: version * 1000,
+        flags: 0,
         mesh: mesh(triangles),
         report: SimplifyStats {
             faces_in: 100,
             faces_out: triangles as u32,
             max_residual_m: 0.01,
         },
+        encoding: Encoding::Full,
     }
 }
 
@@ -104,23 +121,34 @@ impl TestClient {
         }
     }
 
-    /// Reads Upserts up to SnapshotDone; returns (object id, version) of each.
+    /// Reads a Session and the Shapes up to SnapshotDone; returns (object id, version) of
+    /// each.
     fn snapshot(&mut self) -> Vec<(u64, u64)> {
+        match self.expect() {
+            Message::Session(_) => {}
+            other => panic!("expected Session, got {other:?}"),
+        }
         let mut objects = Vec::new();
         loop {
             match self.expect() {
-                Message::Upsert(u) => objects.push((u.object_id, u.version)),
+                Message::Shape(u) => objects.push((u.object_id(), u.version())),
                 Message::SnapshotDone => return objects,
-                other => panic!("expected Upsert or SnapshotDone, got {other:?}"),
+                other => panic!("expected Shape or SnapshotDone, got {other:?}"),
             }
         }
     }
 
-    fn upsert(&mut self) -> Upsert {
+    fn shape(&mut self) -> Shape {
         match self.expect() {
-            Message::Upsert(u) => u,
-            other => panic!("expected Upsert, got {other:?}"),
+            Message::Shape(u) => u,
+            other => panic!("expected Shape, got {other:?}"),
         }
+    }
+
+    fn send(&mut self, message: Message) {
+        let mut frame = Vec::new();
+        tacmesh_protocol::encode(&message, &mut frame).expect("encodes");
+        self.stream.write_all(&frame).expect("the publisher reads");
     }
 }
 
@@ -148,20 +176,20 @@ fn late_joiner_gets_hello_snapshot_and_snapshot_done() {
     let dir = tempfile::tempdir().unwrap();
     let path = socket_in(&dir);
     let publisher = publisher(&path);
-    publisher.upsert(upsert(1, 1, 4)).unwrap();
-    publisher.upsert(upsert(2, 1, 4)).unwrap();
-    publisher.upsert(upsert(3, 1, 4)).unwrap();
-    publisher.upsert(upsert(3, 5, 4)).unwrap();
+    publisher.shape(shape(1, 1, 4)).unwrap();
+    publisher.shape(shape(2, 1, 4)).unwrap();
+    publisher.shape(shape(3, 1, 4)).unwrap();
+    publisher.shape(shape(3, 5, 4)).unwrap();
     publisher.remove(2);
 
     let mut client = TestClient::connect(&path);
     client.hello();
     assert_eq!(client.snapshot(), vec![(1, 1), (3, 5)]);
 
-    publisher.upsert(upsert(4, 1, 4)).unwrap();
-    let live = client.upsert();
-    assert_eq!((live.object_id, live.version), (4, 1));
-    assert_eq!(live, upsert(4, 1, 4));
+    publisher.shape(shape(4, 1, 4)).unwrap();
+    let live = client.shape();
+    assert_eq!((live.object_id(), live.version()), (4, 1));
+    assert_eq!(live, shape(4, 1, 4));
     publisher.remove(1);
     assert_eq!(client.expect(), Message::Remove { object_id: 1 });
 }
@@ -190,18 +218,18 @@ fn update_reaches_two_clients() {
     wait_until("both clients registered", || {
         publisher.counters().clients_connected == 2
     });
-    publisher.upsert(upsert(9, 1, 10)).unwrap();
+    publisher.shape(shape(9, 1, 10)).unwrap();
     let stats = Stats {
         frames_in: 30,
         ..Stats::default()
     };
     publisher.stats(stats.clone()).unwrap();
     for client in [&mut a, &mut b] {
-        assert_eq!(client.upsert().object_id, 9);
+        assert_eq!(client.shape().object_id(), 9);
         assert_eq!(client.expect(), Message::Stats(stats.clone()));
     }
     wait_until("meshes counted", || {
-        publisher.counters().meshes_published == 2
+        publisher.counters().shapes_published == 2
     });
     assert!(publisher.counters().bytes_sent > 0);
 }
@@ -223,7 +251,7 @@ fn stalled_client_does_not_delay_another() {
         let start = Instant::now();
         let mut ids = Vec::new();
         while ids.len() < 200 {
-            ids.push(reader.upsert().object_id);
+            ids.push(reader.shape().object_id());
         }
         (ids, start.elapsed())
     });
@@ -231,9 +259,9 @@ fn stalled_client_does_not_delay_another() {
     // socket buffer fills within the first one.
     let mut slowest_call = Duration::ZERO;
     for id in 0..200 {
-        let update = upsert(id, 1, 20_000);
+        let update = shape(id, 1, 20_000);
         let start = Instant::now();
-        publisher.upsert(update).unwrap();
+        publisher.shape(update).unwrap();
         slowest_call = slowest_call.max(start.elapsed());
     }
     let (ids, elapsed) = receive.join().unwrap();
@@ -255,7 +283,9 @@ fn garbage_client_is_dropped_while_another_keeps_receiving() {
     bad.snapshot();
     // A well-formed Subscribe is fine, then a frame of unknown kind 0x7f.
     bad.stream
-        .write_all(&[1, 0, 0, 0, 0x80, 3, 0, 0, 0, 0x7f, 1, 2])
+        .write_all(&[
+            12, 0, 0, 0, 0x81, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0, 0, 3, 0, 0, 0, 0x7f, 1, 2,
+        ])
         .unwrap();
     wait_until("the garbage client dropped", || {
         publisher.counters().clients_dropped == 1
@@ -263,8 +293,8 @@ fn garbage_client_is_dropped_while_another_keeps_receiving() {
     assert_eq!(bad.next(), None, "the bad client's connection is closed");
     assert_eq!(publisher.counters().clients_connected, 1);
 
-    publisher.upsert(upsert(5, 1, 3)).unwrap();
-    assert_eq!(good.upsert().object_id, 5);
+    publisher.shape(shape(5, 1, 3)).unwrap();
+    assert_eq!(good.shape().object_id(), 5);
 }
 
 #[test]
@@ -280,26 +310,26 @@ fn oversize_and_wrong_direction_frames_drop_the_client() {
 }
 
 #[test]
-fn newer_upsert_replaces_an_unsent_older_one() {
+fn newer_shape_replaces_an_unsent_older_one() {
     let dir = tempfile::tempdir().unwrap();
     let (_, publisher, mut client) = serving_one_client(&dir);
     // Object 1 is larger than the socket buffers, so the writer is stuck on it while the client
     // does not read; object 2 meanwhile gets three versions.
-    publisher.upsert(upsert(1, 1, 200_000)).unwrap();
+    publisher.shape(shape(1, 1, 200_000)).unwrap();
     std::thread::sleep(Duration::from_millis(50));
     for version in 1..=3 {
-        publisher.upsert(upsert(2, version, 3)).unwrap();
+        publisher.shape(shape(2, version, 3)).unwrap();
     }
-    assert_eq!(client.upsert().object_id, 1);
-    let latest = client.upsert();
-    assert_eq!((latest.object_id, latest.version), (2, 3));
+    assert_eq!(client.shape().object_id(), 1);
+    let latest = client.shape();
+    assert_eq!((latest.object_id(), latest.version()), (2, 3));
 
-    // A remove cancels an unsent upsert of the same object.
-    publisher.upsert(upsert(3, 1, 200_000)).unwrap();
+    // A remove cancels an unsent shape of the same object.
+    publisher.shape(shape(3, 1, 200_000)).unwrap();
     std::thread::sleep(Duration::from_millis(50));
-    publisher.upsert(upsert(4, 1, 3)).unwrap();
+    publisher.shape(shape(4, 1, 3)).unwrap();
     publisher.remove(4);
-    assert_eq!(client.upsert().object_id, 3);
+    assert_eq!(client.shape().object_id(), 3);
     assert_eq!(client.expect(), Message::Remove { object_id: 4 });
 }
 
@@ -307,9 +337,9 @@ fn newer_upsert_replaces_an_unsent_older_one() {
 fn older_version_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let publisher = publisher(&socket_in(&dir));
-    publisher.upsert(upsert(1, 2, 3)).unwrap();
+    publisher.shape(shape(1, 2, 3)).unwrap();
     assert!(matches!(
-        publisher.upsert(upsert(1, 2, 3)),
+        publisher.shape(shape(1, 2, 3)),
         Err(PublishError::VersionNotNewer { current: 2, .. })
     ));
 }
@@ -339,7 +369,7 @@ fn live_publisher_makes_second_bind_fail() {
         .to_string()
         .contains("another tacmesh daemon is serving"));
     // The first one is untouched.
-    first.upsert(upsert(1, 1, 3)).unwrap();
+    first.shape(shape(1, 1, 3)).unwrap();
     let mut client = TestClient::connect(&path);
     client.hello();
     assert_eq!(client.snapshot(), vec![(1, 1)]);
@@ -427,7 +457,7 @@ fn only_allowed_peers_may_subscribe() {
         config.server_name = "tacmesh-test".into();
         config.allowed_peers = Some(allowed);
         let publisher = Publisher::bind(config).unwrap();
-        publisher.upsert(upsert(1, 1, 4)).unwrap();
+        publisher.shape(shape(1, 1, 4)).unwrap();
         let mut client = TestClient::connect(&path);
         if admitted {
             client.hello();
@@ -480,8 +510,8 @@ fn shutdown_sends_goodbye_and_removes_the_socket() {
     });
     // The stalled client's writer is blocked in the middle of a mesh larger than its socket
     // buffer; the reading client takes the mesh.
-    publisher.upsert(upsert(1, 1, 200_000)).unwrap();
-    assert_eq!(client.upsert().object_id, 1);
+    publisher.shape(shape(1, 1, 200_000)).unwrap();
+    assert_eq!(client.shape().object_id(), 1);
     let start = Instant::now();
     publisher.shutdown("SIGTERM received");
     assert!(
@@ -525,8 +555,8 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     });
     // The other client reads all the time (with this short timeout it must).
     let receive =
-        std::thread::spawn(move || [reader.upsert().object_id, reader.upsert().object_id]);
-    publisher.upsert(upsert(1, 1, 200_000)).unwrap(); // far more than a socket buffer
+        std::thread::spawn(move || [reader.shape().object_id(), reader.shape().object_id()]);
+    publisher.shape(shape(1, 1, 200_000)).unwrap(); // far more than a socket buffer
     let started = Instant::now();
     let deadline = started + 2 * write_timeout + WAIT;
     while publisher.counters().clients_dropped == 0 {
@@ -539,7 +569,7 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     assert!(started.elapsed() >= write_timeout);
     assert_eq!(publisher.counters().clients_connected, 1);
     // The reading client is still served.
-    publisher.upsert(upsert(2, 1, 3)).unwrap();
+    publisher.shape(shape(2, 1, 3)).unwrap();
     assert_eq!(receive.join().unwrap(), [1, 2]);
     assert_eq!(publisher.counters().clients_dropped, 1);
 }
@@ -553,13 +583,13 @@ fn a_half_closed_client_keeps_receiving() {
     client.stream.shutdown(std::net::Shutdown::Write).unwrap();
     // Give the reader thread time to see the end of the client's input.
     std::thread::sleep(Duration::from_millis(100));
-    publisher.upsert(upsert(1, 1, 10)).unwrap();
-    assert_eq!(client.upsert().object_id, 1);
+    publisher.shape(shape(1, 1, 10)).unwrap();
+    assert_eq!(client.shape().object_id(), 1);
     assert_eq!(publisher.counters().clients_connected, 1);
 
     drop(client);
     // The writer finds the closed connection at its next write.
-    publisher.upsert(upsert(1, 2, 10)).unwrap();
+    publisher.shape(shape(1, 2, 10)).unwrap();
     wait_until("the closed client unregistered", || {
         publisher.counters().clients_connected == 0
     });
@@ -572,16 +602,16 @@ fn shutdown_sends_what_is_queued_before_goodbye() {
     let dir = tempfile::tempdir().unwrap();
     let path = socket_in(&dir);
     let publisher = publisher(&path);
-    publisher.upsert(upsert(3, 1, 10)).unwrap();
+    publisher.shape(shape(3, 1, 10)).unwrap();
     let mut client = TestClient::connect(&path);
     client.hello();
     assert_eq!(client.snapshot(), vec![(3, 1)]);
     // A mesh far larger than the socket's buffer keeps the writer busy while the client does
     // not read; the next updates wait in the queue behind it.
-    publisher.upsert(upsert(1, 1, 50_000)).unwrap();
+    publisher.shape(shape(1, 1, 50_000)).unwrap();
     std::thread::sleep(Duration::from_millis(200));
-    publisher.upsert(upsert(2, 1, 10)).unwrap();
-    publisher.upsert(upsert(1, 2, 10)).unwrap();
+    publisher.shape(shape(2, 1, 10)).unwrap();
+    publisher.shape(shape(1, 2, 10)).unwrap();
     publisher.remove(3);
     let stopping = std::thread::spawn(move || {
         publisher.shutdown("SIGTERM received");
@@ -591,7 +621,7 @@ fn shutdown_sends_what_is_queued_before_goodbye() {
     let mut seen = Vec::new();
     while let Some(message) = client.next() {
         seen.push(match message {
-            Message::Upsert(u) => format!("upsert {}", u.object_id),
+            Message::Shape(u) => format!("shape {}", u.object_id()),
             Message::Remove { object_id } => format!("remove {object_id}"),
             Message::Goodbye { .. } => "goodbye".into(),
             other => other.name().to_string(),
@@ -600,7 +630,7 @@ fn shutdown_sends_what_is_queued_before_goodbye() {
     stopping.join().unwrap();
     assert_eq!(
         seen,
-        ["upsert 1", "upsert 1", "upsert 2", "remove 3", "goodbye"]
+        ["shape 1", "shape 1", "shape 2", "remove 3", "goodbye"]
     );
 }
 
@@ -614,17 +644,17 @@ fn a_client_back_from_a_stall_reads_little_that_is_stale() {
     let (_, publisher, mut client) = serving_one_client(&dir);
     // 300 versions of two objects (about 2.5 kB each) while the client does not read.
     for version in 1..=300u64 {
-        publisher.upsert(upsert(1, version, 100)).unwrap();
-        publisher.upsert(upsert(2, version, 100)).unwrap();
+        publisher.shape(shape(1, version, 100)).unwrap();
+        publisher.shape(shape(2, version, 100)).unwrap();
         std::thread::sleep(Duration::from_millis(1));
     }
     std::thread::sleep(Duration::from_millis(200));
     let mut stale = 0;
     let mut current = std::collections::BTreeSet::new();
     while current.len() < 2 {
-        let u = client.upsert();
-        if u.version == 300 {
-            current.insert(u.object_id);
+        let u = client.shape();
+        if u.version() == 300 {
+            current.insert(u.object_id());
         } else {
             stale += 1;
         }
@@ -644,21 +674,201 @@ fn a_client_not_reading_at_shutdown_still_gets_its_goodbye() {
     let (_, publisher, mut client) = serving_one_client(&dir);
     // About 50 kB queued: ten times the small buffer.
     for id in 1..=20 {
-        publisher.upsert(upsert(id, 1, 100)).unwrap();
+        publisher.shape(shape(id, 1, 100)).unwrap();
     }
     publisher.shutdown("SIGTERM received");
-    let mut upserts = 0;
+    let mut shapes = 0;
     loop {
         match client.next() {
-            Some(Message::Upsert(_)) => upserts += 1,
+            Some(Message::Shape(_)) => shapes += 1,
             Some(Message::Goodbye { reason }) => {
                 assert_eq!(reason, "SIGTERM received");
                 break;
             }
             Some(other) => panic!("unexpected {other:?}"),
-            None => panic!("the connection ended without a Goodbye after {upserts} upserts"),
+            None => panic!("the connection ended without a Goodbye after {shapes} shapes"),
         }
     }
-    assert_eq!(upserts, 20);
+    assert_eq!(shapes, 20);
     assert_eq!(client.next(), None);
+}
+
+/// A rigid move is a Pose after the shape it places, never the mesh again; a newer pose of an
+/// object replaces its unsent one.
+#[test]
+fn a_move_is_a_pose_and_a_newer_pose_replaces_an_unsent_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, publisher, mut client) = serving_one_client(&dir);
+    publisher.shape(shape(1, 1, 10)).unwrap();
+    publisher.pose(pose(1, 1, 2000)).unwrap();
+    assert_eq!(client.shape().version(), 1);
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 2000)));
+    // Keep the writer busy with a big shape while two poses of another object queue up.
+    publisher.shape(shape(2, 1, 200_000)).unwrap();
+    publisher.pose(pose(1, 1, 3000)).unwrap();
+    publisher.pose(pose(1, 1, 4000)).unwrap();
+    assert_eq!(client.shape().object_id(), 2);
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 4000)));
+    let counters = publisher.counters();
+    assert_eq!(
+        (counters.shapes_published, counters.poses_published),
+        (2, 2)
+    );
+    // A late joiner gets the shape and the pose newer than the one inside it.
+    let mut late = TestClient::connect(&socket_in(&dir));
+    late.hello();
+    assert!(matches!(late.expect(), Message::Session(_)));
+    assert_eq!(late.shape().object_id(), 1);
+    assert_eq!(late.expect(), Message::Pose(pose(1, 1, 4000)));
+    assert_eq!(late.shape().object_id(), 2);
+    assert_eq!(late.expect(), Message::SnapshotDone);
+}
+
+#[test]
+fn a_pose_for_a_shape_not_published_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let publisher = publisher(&socket_in(&dir));
+    assert!(matches!(
+        publisher.pose(pose(1, 1, 1000)),
+        Err(PublishError::PoseForUnknownShape { current: None, .. })
+    ));
+    publisher.shape(shape(1, 2, 3)).unwrap();
+    let refused = publisher.pose(pose(1, 1, 1000)).unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("its published shape is version 2"),
+        "{refused}"
+    );
+}
+
+/// A client that asks for the compact encoding and a resend gets a second snapshot whose
+/// Session states the options and whose shapes are compact and smaller.
+#[test]
+fn a_resend_in_compact_encoding_gives_a_fresh_smaller_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = publisher(&path);
+    publisher.shape(shape(1, 1, 200)).unwrap();
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![(1, 1)]);
+    let before = publisher.counters().bytes_sent;
+    let options = Subscribe {
+        encoding: Encoding::Compact,
+        resend: true,
+        ..Subscribe::default()
+    };
+    client.send(Message::Subscribe(options.clone()));
+    match client.expect() {
+        Message::Session(session) => assert_eq!(session.options, options),
+        other => panic!("expected Session, got {other:?}"),
+    }
+    let compact = client.shape();
+    assert_eq!(compact.encoding, Encoding::Compact);
+    assert_eq!(client.expect(), Message::SnapshotDone);
+    let full = shape(1, 1, 200);
+    for (a, b) in compact.mesh.vertices.iter().zip(&full.mesh.vertices) {
+        assert!(a.distance(*b) <= compact.report.max_residual_m);
+    }
+    wait_until("the compact snapshot counted", || {
+        publisher.counters().bytes_sent > before
+    });
+    let compact_bytes = publisher.counters().bytes_sent - before;
+    let mut full_frame = Vec::new();
+    tacmesh_protocol::encode(&Message::Shape(full), &mut full_frame).unwrap();
+    assert!(
+        (compact_bytes as usize) < full_frame.len() * 6 / 10,
+        "compact snapshot {compact_bytes} B, full shape alone {} B",
+        full_frame.len()
+    );
+}
+
+/// Only the kinds and ids a client asked for reach it, Removes included.
+#[test]
+fn a_filter_by_kind_and_id_holds_back_everything_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, publisher, mut client) = serving_one_client(&dir);
+    client.send(Message::Subscribe(Subscribe {
+        kinds: Kinds::OBJECTS,
+        object_ids: vec![2],
+        ..Subscribe::default()
+    }));
+    // Wait until the publisher has read it: a resend is the only visible answer.
+    client.send(Message::Subscribe(Subscribe {
+        kinds: Kinds::OBJECTS,
+        object_ids: vec![2],
+        resend: true,
+        ..Subscribe::default()
+    }));
+    assert_eq!(client.snapshot(), vec![]);
+    let support = tacmesh_protocol::FIRST_SUPPORT_ID;
+    publisher.shape(shape(support, 1, 3)).unwrap();
+    publisher.shape(shape(1, 1, 3)).unwrap();
+    publisher.shape(shape(2, 1, 3)).unwrap();
+    assert_eq!(client.shape().object_id(), 2);
+    publisher.remove(1);
+    publisher.remove(support);
+    publisher.remove(2);
+    assert_eq!(client.expect(), Message::Remove { object_id: 2 });
+    publisher.stats(Stats::default()).unwrap();
+    assert!(matches!(client.expect(), Message::Stats(_)));
+}
+
+/// With a rate cap, updates of one object within the interval wait and only the latest goes
+/// out when it is over; other objects are not held back by it.
+#[test]
+fn a_rate_cap_sends_the_latest_update_once_per_interval() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, publisher, mut client) = serving_one_client(&dir);
+    client.send(Message::Subscribe(Subscribe {
+        max_rate_hz: 2.0,
+        resend: true,
+        ..Subscribe::default()
+    }));
+    assert_eq!(client.snapshot(), vec![]);
+    publisher.shape(shape(1, 1, 3)).unwrap();
+    assert_eq!(client.shape().version(), 1);
+    let sent = Instant::now();
+    for time in 2..=20 {
+        publisher.pose(pose(1, 1, time * 1000)).unwrap();
+    }
+    publisher.shape(shape(2, 1, 3)).unwrap();
+    assert_eq!(
+        client.shape().object_id(),
+        2,
+        "another object is not held back"
+    );
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 20_000)));
+    let waited = sent.elapsed();
+    assert!(
+        waited >= Duration::from_millis(400),
+        "the pose came {waited:?} after the shape, within the 500 ms interval"
+    );
+    assert_eq!(publisher.counters().poses_published, 1);
+}
+
+/// A version-1 client that sends its empty Subscribe gets a Goodbye saying which version the
+/// server speaks, and is let go; others are served on.
+#[test]
+fn a_version_1_subscribe_gets_a_goodbye_naming_version_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, publisher, mut other) = serving_one_client(&dir);
+    let mut old = TestClient::connect(&path);
+    old.send(Message::SubscribeV1);
+    old.hello();
+    let mut reason = None;
+    while let Some(message) = old.next() {
+        if let Message::Goodbye { reason: why } = message {
+            reason = Some(why);
+        }
+    }
+    let reason = reason.expect("a Goodbye before the end");
+    assert!(reason.contains("protocol version 2"), "{reason}");
+    assert!(reason.contains("version-1 Subscribe"), "{reason}");
+    wait_until("the old client counted", || {
+        publisher.counters().clients_dropped == 1
+    });
+    publisher.shape(shape(1, 1, 3)).unwrap();
+    assert_eq!(other.shape().object_id(), 1);
 }

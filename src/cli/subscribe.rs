@@ -1,4 +1,3 @@
-use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -7,13 +6,14 @@ use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::default_socket_path;
 use tacmesh::daemon::planes::FIRST_PLANE_ID;
-use tacmesh::protocol::{Message, SimplifyStats, Upsert};
+use tacmesh::protocol::{Encoding, Kinds, Message, Pose, Scene, SceneChange, Shape, Subscribe};
 use tacmesh::source::monotonic_now;
 use tacmesh::subscriber::Subscription;
 use tacmesh::TriMesh;
 
-/// Connect to a running daemon and print one line per message: object (or support plane),
-/// version, faces and the age of the data; a move of an unchanged mesh is marked as such.
+/// Connect to a running daemon and print one line per message: a new shape of an object (or
+/// support plane) with its faces and the age of its data, a move (a pose) with how far and how
+/// fast, a sighting of a static object, a removal.
 #[derive(Debug, Args)]
 pub struct SubscribeArgs {
     /// Socket path [default, as `tacmesh run`: $XDG_RUNTIME_DIR/tacmesh.sock; without a runtime
@@ -21,17 +21,57 @@ pub struct SubscribeArgs {
     /// when set)]
     #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
-    /// Write each object's latest mesh to DIR/object-ID.ply and each support plane's to
-    /// DIR/plane-N.ply (replaced whole on every update, never left half-written; deleted when
-    /// the object is removed)
+    /// Write each object's latest mesh, in the world, to DIR/object-ID.ply and each support
+    /// plane's to DIR/plane-N.ply (replaced whole on every shape or move, never left
+    /// half-written; deleted when the object is removed)
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
-    /// Exit after this many mesh updates
+    /// Exit after this many updates (shapes and poses)
     #[arg(long, value_name = "N")]
     count: Option<u64>,
     /// Also print the daemon's periodic stats
     #[arg(long)]
     stats: bool,
+    /// Ask for shapes in the compact encoding (16-bit vertices within each object's box, about
+    /// half the bytes; the residual says what it adds)
+    #[arg(long)]
+    compact: bool,
+    /// At most this many updates a second per object (the latest is sent when the interval is
+    /// over)
+    #[arg(long, value_name = "HZ")]
+    max_rate_hz: Option<f32>,
+    /// Only objects, or only support planes
+    #[arg(long, value_name = "KIND", value_parser = ["objects", "supports"])]
+    only: Option<String>,
+    /// Only these object ids (repeat, or separate with commas)
+    #[arg(long = "id", value_name = "ID", value_delimiter = ',')]
+    ids: Vec<u64>,
+}
+
+impl SubscribeArgs {
+    /// The Subscribe these options ask for, or `None` for the defaults (nothing to send).
+    fn options(&self) -> Option<Subscribe> {
+        let options = Subscribe {
+            encoding: if self.compact {
+                Encoding::Compact
+            } else {
+                Encoding::Full
+            },
+            resend: true,
+            max_rate_hz: self.max_rate_hz.unwrap_or(0.0),
+            kinds: match self.only.as_deref() {
+                Some("objects") => Kinds::OBJECTS,
+                Some("supports") => Kinds::SUPPORTS,
+                _ => Kinds::ALL,
+            },
+            object_ids: self.ids.clone(),
+        };
+        let defaults = Subscribe {
+            resend: true,
+            ..Subscribe::default()
+        };
+        (options != defaults).then_some(options)
+    }
 }
 
 pub fn run(args: SubscribeArgs) -> anyhow::Result<()> {
@@ -50,54 +90,71 @@ pub fn run(args: SubscribeArgs) -> anyhow::Result<()> {
 
 fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
-    let socket = args.socket.unwrap_or_else(default_socket_path);
+    let socket = args.socket.clone().unwrap_or_else(default_socket_path);
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     }
-    let mut subscription = Subscription::connect(&socket, None)?;
+    if let Some(rate) = args.max_rate_hz {
+        anyhow::ensure!(
+            rate.is_finite() && rate >= 0.0,
+            "--max-rate-hz {rate}: give a rate in Hz, 0 or more"
+        );
+    }
+    anyhow::ensure!(
+        args.ids.len() <= tacmesh::protocol::MAX_SUBSCRIBE_IDS,
+        "--id: at most {} ids",
+        tacmesh::protocol::MAX_SUBSCRIBE_IDS
+    );
+    let mut subscription = Subscription::connect_with(&socket, None, args.options())?;
     writeln!(
         out,
         "connected to {} on {}",
         subscription.server,
         socket.display()
     )?;
-    let mut upserts = 0u64;
-    let mut last: BTreeMap<u64, Shown> = BTreeMap::new();
+    let mut updates = 0u64;
+    let mut scene = Scene::new();
     loop {
-        if args.count.is_some_and(|n| upserts >= n) {
+        if args.count.is_some_and(|n| updates >= n) {
             return Ok(());
         }
         let message = subscription.next_message()?;
-        match message {
-            Message::Upsert(upsert) => {
-                upserts += 1;
-                let age = Duration::from_nanos(
-                    (monotonic_now().as_nanos() as u64).saturating_sub(upsert.capture_time_ns),
-                );
+        let previous_pose = match &message {
+            Message::Pose(pose) => scene.get(pose.object_id).map(|object| object.pose),
+            _ => None,
+        };
+        let change = scene.apply(&message);
+        let changed = match (change, &message) {
+            (SceneChange::Added(id) | SceneChange::Reshaped(id), Message::Shape(shape)) => {
+                updates += 1;
                 writeln!(
                     out,
                     "{}",
-                    describe_upsert(&upsert, last.get(&upsert.object_id), age)
+                    describe_shape(shape, age_of(shape.shape_time_ns))
                 )?;
-                if let Some(dir) = &args.out {
-                    let path = dir.join(file_name(upsert.object_id));
-                    write_mesh_whole(&path, &upsert.mesh)
-                        .with_context(|| format!("writing {}", path.display()))?;
-                }
-                last.insert(upsert.object_id, Shown::of(upsert));
+                Some(id)
             }
-            Message::Remove { object_id } => {
-                writeln!(out, "remove {}", Id(object_id))?;
-                last.remove(&object_id);
+            (SceneChange::Moved(id), Message::Pose(pose)) => {
+                updates += 1;
+                let previous = previous_pose.unwrap_or(*pose);
+                writeln!(out, "{}", describe_pose(pose, &previous))?;
+                (pose.pose_time_ns != previous.pose_time_ns).then_some(id)
+            }
+            (SceneChange::Removed(id), _) => {
+                writeln!(out, "remove {}", Id(id))?;
                 if let Some(dir) = &args.out {
                     // Absent when the object never got a mesh here; nothing to do then.
-                    let _ = std::fs::remove_file(dir.join(file_name(object_id)));
+                    let _ = std::fs::remove_file(dir.join(file_name(id)));
                 }
+                None
             }
-            Message::SnapshotDone => {
-                let planes = last.range(FIRST_PLANE_ID..).count();
-                let objects = last.len() - planes;
+            (SceneChange::SnapshotDone, _) => {
+                let planes = scene
+                    .objects()
+                    .filter(|o| o.object_id() >= FIRST_PLANE_ID)
+                    .count();
+                let objects = scene.len() - planes;
                 let plural = |n: usize| if n == 1 { "" } else { "s" };
                 writeln!(
                     out,
@@ -105,30 +162,58 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                     plural(objects),
                     plural(planes)
                 )?;
+                None
             }
-            Message::Stats(stats) => {
+            (_, Message::Stats(stats)) => {
                 if args.stats {
                     writeln!(
-                    out,
-                        "stats frames in {} dropped {} objects {} meshing runs {} published {} bytes {} frame-to-publish p50 {:.1} ms p99 {:.1} ms",
+                        out,
+                        "stats frames in {} dropped {} objects {} meshing runs {} shapes {} poses {} bytes {} \
+                         source errors {} malformed frames {} subscribers {} frame-to-publish p50 {:.1} ms p99 {:.1} ms",
                         stats.frames_in,
                         stats.frames_dropped,
                         stats.objects_tracked,
                         stats.meshing_runs,
-                        stats.meshes_published,
+                        stats.shapes_published,
+                        stats.poses_published,
                         stats.bytes_sent,
+                        stats.source_errors,
+                        stats.malformed_frames,
+                        stats.clients_connected,
                         stats.frame_to_publish_p50_ms,
                         stats.frame_to_publish_p99_ms
                     )?;
                 }
+                None
             }
-            Message::Goodbye { reason } => {
+            (_, Message::Goodbye { reason }) => {
                 writeln!(out, "goodbye: {reason}")?;
                 return Ok(());
             }
-            other => writeln!(out, "unexpected {} message; ignored", other.name())?,
+            // A Session (the scene starts again), a stale update, a Remove of an object not
+            // held: nothing to show.
+            (
+                _,
+                Message::Session(_) | Message::Shape(_) | Message::Pose(_) | Message::Remove { .. },
+            ) => None,
+            (_, other) => {
+                writeln!(out, "unexpected {} message; ignored", other.name())?;
+                None
+            }
+        };
+        if let (Some(dir), Some(id)) = (&args.out, changed) {
+            if let Some(mesh) = scene.world_mesh(id) {
+                let path = dir.join(file_name(id));
+                write_mesh_whole(&path, &mesh)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
         }
     }
+}
+
+/// The age of data captured at `capture_ns` on this host's monotonic clock.
+fn age_of(capture_ns: u64) -> Duration {
+    Duration::from_nanos((monotonic_now().as_nanos() as u64).saturating_sub(capture_ns))
 }
 
 /// An object id as a reader takes it: objects by their id, support planes (ids from 2^32 up,
@@ -159,75 +244,61 @@ fn file_name(object_id: u64) -> String {
     format!("{kind}-{number}.ply")
 }
 
-/// What was last shown of an object, to tell a move of the same mesh from a new mesh.
-struct Shown {
-    mesh: TriMesh,
-    report: SimplifyStats,
-}
-
-impl Shown {
-    fn of(upsert: Upsert) -> Self {
-        Self {
-            mesh: upsert.mesh,
-            report: upsert.report,
-        }
-    }
-}
-
-/// Data older than this is shown in seconds, with a note that the mesh is unchanged since:
+/// Data older than this is shown in seconds, with a note that the shape is unchanged since:
 /// the daemon re-meshes an object only when new data changed it, so a static object that
-/// converged keeps the capture time of its last meshing while it is still tracked (a tracked
-/// object that is no longer seen is removed, and a Remove says so).
+/// converged keeps the time of its last meshing while it is still tracked (its sightings say
+/// it is still there, and a Remove says when it is gone).
 const UNCHANGED_AFTER: Duration = Duration::from_secs(1);
 
-/// One line for an Upsert: a new mesh, or (same triangles and report as `previous`) the same
-/// mesh moved to a new pose.
-fn describe_upsert(upsert: &Upsert, previous: Option<&Shown>, age: Duration) -> String {
-    let id = Id(upsert.object_id);
-    let age = if age < UNCHANGED_AFTER {
+fn describe_age(age: Duration, what: &str) -> String {
+    if age < UNCHANGED_AFTER {
         format!("age {:.0} ms", age.as_secs_f64() * 1e3)
     } else {
-        format!(
-            "age {:.1} s (mesh unchanged since; still tracked)",
-            age.as_secs_f64()
-        )
-    };
-    let mesh = &upsert.mesh;
-    let pose_only = previous.filter(|p| {
-        p.report == upsert.report
-            && p.mesh.triangles == mesh.triangles
-            && p.mesh.vertices.len() == mesh.vertices.len()
-    });
-    if let Some(previous) = pose_only {
-        let moved_m = previous
-            .mesh
-            .vertices
-            .iter()
-            .zip(&mesh.vertices)
-            .map(|(a, b)| a.distance(*b))
-            .fold(0.0f32, f32::max);
-        return format!(
-            "upsert {id} version {} pose only: same {} faces, moved up to {:.1} mm; {age}",
-            upsert.version,
-            mesh.triangles.len(),
-            moved_m * 1e3
-        );
+        format!("age {:.1} s ({what} unchanged since)", age.as_secs_f64())
     }
-    if upsert.object_id >= FIRST_PLANE_ID {
+}
+
+/// One line for a Shape: a new mesh of an object.
+fn describe_shape(shape: &Shape, age: Duration) -> String {
+    let id = Id(shape.object_id());
+    let age = describe_age(age, "shape");
+    let mesh = &shape.mesh;
+    let closed = if shape.is_closed() { "closed" } else { "open" };
+    if shape.is_support() {
         return format!(
-            "upsert {id} version {} faces {} vertices {}; {age}",
-            upsert.version,
+            "shape {id} version {} faces {} vertices {}; {age}",
+            shape.version(),
             mesh.triangles.len(),
             mesh.vertices.len()
         );
     }
     format!(
-        "upsert {id} version {} faces {} vertices {} (from {} faces, residual {:.1} mm); {age}",
-        upsert.version,
+        "shape {id} version {} faces {} vertices {} {closed} (from {} faces, residual {:.1} mm); {age}",
+        shape.version(),
         mesh.triangles.len(),
         mesh.vertices.len(),
-        upsert.report.faces_in,
-        upsert.report.max_residual_m * 1e3
+        shape.report.faces_in,
+        shape.report.max_residual_m * 1e3
+    )
+}
+
+/// One line for a Pose: a move (how far, how fast) or a sighting of an object held still.
+fn describe_pose(pose: &Pose, previous: &Pose) -> String {
+    let id = Id(pose.object_id);
+    if pose.pose_time_ns == previous.pose_time_ns {
+        return format!(
+            "seen {id}: still, last seen {}",
+            describe_age(age_of(pose.last_seen_ns), "pose").replace("age ", "")
+        );
+    }
+    let moved_mm = pose.translation.distance(previous.translation) * 1e3;
+    let turned_deg = pose.rotation.angle_between(previous.rotation).to_degrees();
+    format!(
+        "pose {id} shape {}: moved {moved_mm:.1} mm, turned {turned_deg:.1}°, velocity {:.3} m/s {:.2} rad/s; {}",
+        pose.shape_version,
+        pose.linear_velocity.length(),
+        pose.angular_velocity.length(),
+        describe_age(age_of(pose.pose_time_ns), "pose")
     )
 }
 
@@ -258,18 +329,38 @@ fn write_mesh_whole(path: &Path, mesh: &TriMesh) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tacmesh::glam::Vec3;
+    use tacmesh::glam::{Quat, Vec3};
+    use tacmesh::protocol::{SimplifyStats, SHAPE_SUPPORT};
 
-    fn upsert(object_id: u64, version: u64, shift: f32) -> Upsert {
-        Upsert {
+    fn pose(object_id: u64, shape_version: u64, time_ms: u64, x: f32) -> Pose {
+        Pose {
             object_id,
-            version,
-            capture_time_ns: 0,
+            shape_version,
+            pose_time_ns: time_ms * 1_000_000,
+            pose_time_realtime_ns: 0,
+            last_seen_ns: time_ms * 1_000_000,
+            rotation: Quat::IDENTITY,
+            translation: Vec3::new(x, 0.0, 0.0),
+            linear_velocity: Vec3::new(0.4, 0.0, 0.0),
+            angular_velocity: Vec3::ZERO,
+        }
+    }
+
+    fn shape(object_id: u64, version: u64) -> Shape {
+        Shape {
+            pose: pose(object_id, version, 0, 0.0),
+            shape_time_ns: 0,
+            shape_time_realtime_ns: 0,
+            flags: if object_id >= FIRST_PLANE_ID {
+                SHAPE_SUPPORT
+            } else {
+                0
+            },
             mesh: TriMesh::new(
                 vec![
-                    Vec3::new(shift, 0.0, 0.0),
-                    Vec3::new(shift + 0.1, 0.0, 0.0),
-                    Vec3::new(shift, 0.1, 0.0),
+                    Vec3::ZERO,
+                    Vec3::new(0.1, 0.0, 0.0),
+                    Vec3::new(0.0, 0.1, 0.0),
                 ],
                 vec![[0, 1, 2]],
             ),
@@ -278,6 +369,7 @@ mod tests {
                 faces_out: 1,
                 max_residual_m: 0.002,
             },
+            encoding: Encoding::Full,
         }
     }
 
@@ -285,10 +377,10 @@ mod tests {
 
     #[test]
     fn planes_read_as_plane_1_not_as_a_huge_object_id() {
-        let line = describe_upsert(&upsert(FIRST_PLANE_ID, 1, 0.0), None, FRESH);
-        assert!(line.starts_with("upsert plane 1 version 1 "), "{line}");
-        let line = describe_upsert(&upsert(FIRST_PLANE_ID + 1, 1, 0.0), None, FRESH);
-        assert!(line.starts_with("upsert plane 2 "), "{line}");
+        let line = describe_shape(&shape(FIRST_PLANE_ID, 1), FRESH);
+        assert!(line.starts_with("shape plane 1 version 1 "), "{line}");
+        let line = describe_shape(&shape(FIRST_PLANE_ID + 1, 1), FRESH);
+        assert!(line.starts_with("shape plane 2 "), "{line}");
         assert_eq!(Id(FIRST_PLANE_ID).to_string(), "plane 1");
         assert_eq!(Id(7).to_string(), "object 7");
         assert_eq!(file_name(FIRST_PLANE_ID), "plane-1.ply");
@@ -296,32 +388,67 @@ mod tests {
     }
 
     #[test]
-    fn a_move_of_the_same_mesh_is_marked_pose_only() {
-        let first = upsert(3, 1, 0.0);
-        let line = describe_upsert(&first, None, FRESH);
-        assert!(!line.contains("pose only"), "{line}");
-        let moved = upsert(3, 2, 0.012);
-        let line = describe_upsert(&moved, Some(&Shown::of(first)), FRESH);
+    fn a_move_says_how_far_and_a_sighting_says_still() {
+        let before = pose(3, 1, 100, 0.0);
+        let line = describe_pose(&pose(3, 1, 133, 0.012), &before);
         assert!(
-            line.contains("upsert object 3 version 2 pose only") && line.contains("12.0 mm"),
+            line.starts_with(
+                "pose object 3 shape 1: moved 12.0 mm, turned 0.0°, velocity 0.400 m/s"
+            ),
             "{line}"
         );
-        // A new mesh (another report) is not a move.
-        let mut remeshed = upsert(3, 3, 0.0);
-        remeshed.report.faces_in = 41;
-        let line = describe_upsert(&remeshed, Some(&Shown::of(moved)), FRESH);
-        assert!(!line.contains("pose only"), "{line}");
+        let mut seen = before;
+        seen.last_seen_ns += 500_000_000;
+        let line = describe_pose(&seen, &before);
+        assert!(
+            line.starts_with("seen object 3: still, last seen "),
+            "{line}"
+        );
     }
 
     #[test]
-    fn an_old_mesh_of_a_tracked_object_says_it_is_unchanged_not_stale() {
-        let line = describe_upsert(&upsert(3, 1, 0.0), None, FRESH);
-        assert!(line.ends_with("age 30 ms"), "{line}");
-        let line = describe_upsert(&upsert(3, 1, 0.0), None, Duration::from_secs(75));
+    fn an_old_shape_says_it_is_unchanged_not_stale() {
+        let line = describe_shape(&shape(3, 1), FRESH);
         assert!(
-            line.ends_with("age 75.0 s (mesh unchanged since; still tracked)"),
+            line.contains(" open (from 40 faces, residual 2.0 mm)"),
             "{line}"
         );
+        assert!(line.ends_with("age 30 ms"), "{line}");
+        let line = describe_shape(&shape(3, 1), Duration::from_secs(75));
+        assert!(
+            line.ends_with("age 75.0 s (shape unchanged since)"),
+            "{line}"
+        );
+    }
+
+    #[test]
+    fn default_options_send_nothing_and_others_ask_for_a_resend() {
+        let parse = |args: &[&str]| {
+            use clap::Parser;
+            #[derive(clap::Parser)]
+            struct Cli {
+                #[command(flatten)]
+                args: SubscribeArgs,
+            }
+            Cli::parse_from(std::iter::once("subscribe").chain(args.iter().copied())).args
+        };
+        assert_eq!(parse(&[]).options(), None);
+        let options = parse(&[
+            "--compact",
+            "--only",
+            "objects",
+            "--id",
+            "3,5",
+            "--max-rate-hz",
+            "10",
+        ])
+        .options()
+        .expect("options");
+        assert_eq!(options.encoding, Encoding::Compact);
+        assert!(options.resend);
+        assert_eq!(options.kinds, Kinds::OBJECTS);
+        assert_eq!(options.object_ids, vec![3, 5]);
+        assert_eq!(options.max_rate_hz, 10.0);
     }
 
     /// A reader that has the mesh file open while it is replaced still reads the whole old
@@ -332,7 +459,7 @@ mod tests {
         use std::io::Read;
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("object-3.ply");
-        let old = upsert(3, 1, 0.0).mesh;
+        let old = shape(3, 1).mesh;
         write_mesh_whole(&path, &old).unwrap();
         let mut reader = std::fs::File::open(&path).unwrap();
         let big = TriMesh::new(

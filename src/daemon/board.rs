@@ -1,48 +1,101 @@
-//! What has been published of each object: its mesh in its own frame, its pose and its
-//! version. The perception thread (new objects, poses, removals) and the mesher (new meshes)
-//! both publish through it, so versions grow by one per upsert whoever sends it.
+//! What has been published of each object: its shape in its own frame, its pose, their times
+//! and versions. The perception thread (new objects, poses, sightings, removals) and the mesher
+//! (new shapes) both publish through it, so that shape versions grow by one per shape whoever
+//! sends it, a rigid move goes out as a Pose (never the mesh again), and no time of an object
+//! goes backwards.
 
 use std::collections::HashMap;
 use std::time::Duration;
 
-use glam::Affine3A;
-use tacmesh_protocol::{SimplifyStats, Upsert};
+use glam::{Affine3A, Quat, Vec3};
+use tacmesh_protocol::{
+    Encoding, Pose, Shape, SimplifyStats, FIRST_SUPPORT_ID, SHAPE_CLOSED, SHAPE_SUPPORT,
+};
 use tacmesh_publish::Publisher;
-use tacmesh_source::{monotonic_now, TriMesh};
+use tacmesh_source::{monotonic_now, realtime_of, TriMesh};
 
 use super::counters::{Counters, Stage};
+
+/// A static object seen again is told so (a Pose with a newer last-seen time) at most this
+/// often, so that a client can tell a converged object from a stale one.
+pub const SEEN_REPORT_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Two poses further apart in time than this give no velocity (the object was not followed
+/// between them).
+const MAX_VELOCITY_GAP: Duration = Duration::from_millis(500);
 
 #[derive(Debug)]
 struct Published {
     mesh_in_object: TriMesh,
     stats: SimplifyStats,
-    capture_time: Duration,
+    closed: bool,
 }
 
 #[derive(Debug)]
 struct Entry {
     world_from_object: Affine3A,
-    version: u64,
+    /// Capture time of the frame the pose is from, of the newest frame that saw the object
+    /// there, and of the newest frame fused into the shape.
+    pose_time: Duration,
+    last_seen: Duration,
+    shape_time: Duration,
+    linear_velocity: Vec3,
+    angular_velocity: Vec3,
+    shape_version: u64,
     mesh: Option<Published>,
+    /// The published shape is in another frame than `world_from_object` (the object was
+    /// reframed): the next publication must be a Shape, since a Pose would place the client's
+    /// shape by the new frame.
+    frame_changed: bool,
+    /// The last-seen time subscribers were last sent, and when (monotonic now).
+    last_seen_sent: Duration,
+    sent_at: Duration,
 }
 
-/// The objects alive now and their last published meshes.
+/// The objects alive now and their last published shapes.
 #[derive(Debug, Default)]
 pub struct Board {
     entries: HashMap<u64, Entry>,
 }
 
+fn nanos(time: Duration) -> u64 {
+    time.as_nanos().min(u64::MAX as u128) as u64
+}
+
+/// Whether every edge of `mesh` is shared by exactly two triangles.
+fn is_closed(mesh: &TriMesh) -> bool {
+    if mesh.triangles.is_empty() {
+        return false;
+    }
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3);
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    edges.values().all(|&n| n == 2)
+}
+
 impl Board {
-    /// A new object (nothing is published until it has a mesh).
-    pub fn create(&mut self, id: u64, world_from_object: Affine3A) {
+    /// A new object seen first at `capture_time` (nothing is published until it has a mesh).
+    pub fn create(&mut self, id: u64, world_from_object: Affine3A, capture_time: Duration) {
         self.entries.entry(id).or_insert(Entry {
             world_from_object,
-            version: 0,
+            pose_time: capture_time,
+            last_seen: capture_time,
+            shape_time: capture_time,
+            linear_velocity: Vec3::ZERO,
+            angular_velocity: Vec3::ZERO,
+            shape_version: 0,
             mesh: None,
+            frame_changed: false,
+            last_seen_sent: Duration::ZERO,
+            sent_at: Duration::ZERO,
         });
     }
 
-    /// The object is gone: forget it and tell subscribers, if they had a mesh of it.
+    /// The object is gone: forget it and tell subscribers, if they had a shape of it.
     pub fn remove(&mut self, id: u64, publisher: &Publisher) {
         if let Some(entry) = self.entries.remove(&id) {
             if entry.mesh.is_some() {
@@ -51,8 +104,21 @@ impl Board {
         }
     }
 
-    /// The object moved: republish its last mesh at the new pose, without re-meshing.
-    /// `capture_time` is that of the frame that saw the move.
+    /// The object was seen at `capture_time` where it is held. An object seen and not moved
+    /// stands still: its velocity is zero until a move says otherwise.
+    pub fn seen(&mut self, id: u64, capture_time: Duration) {
+        let Some(entry) = self.entries.get_mut(&id) else {
+            return;
+        };
+        if capture_time > entry.pose_time {
+            entry.linear_velocity = Vec3::ZERO;
+            entry.angular_velocity = Vec3::ZERO;
+        }
+        entry.last_seen = entry.last_seen.max(capture_time);
+    }
+
+    /// The object moved, seen at `capture_time`: publish the new pose (and a velocity from the
+    /// last two poses), without re-meshing.
     pub fn move_to(
         &mut self,
         id: u64,
@@ -64,19 +130,56 @@ impl Board {
         let Some(entry) = self.entries.get_mut(&id) else {
             return;
         };
+        if capture_time < entry.pose_time {
+            return; // an older frame's estimate: the held pose is newer
+        }
+        let dt = capture_time.saturating_sub(entry.pose_time);
+        if !dt.is_zero() && dt <= MAX_VELOCITY_GAP {
+            let (from, to) = (entry.world_from_object, world_from_object);
+            let seconds = dt.as_secs_f32();
+            entry.linear_velocity = Vec3::from(to.translation - from.translation) / seconds;
+            let turn = Quat::from_mat3a(&to.matrix3) * Quat::from_mat3a(&from.matrix3).inverse();
+            let (axis, angle) = turn.normalize().to_axis_angle();
+            // to_axis_angle gives an angle in [0, 2π): the short way round is below π.
+            let angle = if angle > std::f32::consts::PI {
+                angle - std::f32::consts::TAU
+            } else {
+                angle
+            };
+            entry.angular_velocity = axis * (angle / seconds);
+        } else {
+            entry.linear_velocity = Vec3::ZERO;
+            entry.angular_velocity = Vec3::ZERO;
+        }
         entry.world_from_object = world_from_object;
-        if let Some(mesh) = &mut entry.mesh {
-            mesh.capture_time = capture_time;
+        entry.pose_time = capture_time;
+        entry.last_seen = entry.last_seen.max(capture_time);
+        if entry.mesh.is_some() {
             Counters::add(&counters.pose_updates, 1);
-            Self::publish(id, entry, publisher, counters);
+            Self::publish_pose(id, entry, publisher, counters);
+        }
+    }
+
+    /// Tells subscribers about static objects seen again since they were last told, at most
+    /// once per [`SEEN_REPORT_INTERVAL`] each.
+    pub fn report_sightings(&mut self, publisher: &Publisher, counters: &Counters) {
+        let now = monotonic_now();
+        for (&id, entry) in &mut self.entries {
+            if entry.mesh.is_some()
+                && entry.last_seen > entry.last_seen_sent
+                && now.saturating_sub(entry.sent_at) >= SEEN_REPORT_INTERVAL
+            {
+                Self::publish_pose(id, entry, publisher, counters);
+            }
         }
     }
 
     /// The object's frame was moved (its fused state restarted, with its origin at the new
     /// cluster): the stored mesh is re-expressed in the new frame, so that it stays where it
-    /// was in the world until its next mesh replaces it, and nothing is published. Without
-    /// this, the next mesh (made in the new frame) went out at the old frame's pose, off by
-    /// the distance between the two origins (2–3 cm on the mOSD scene changes).
+    /// was in the world until its next mesh replaces it. Nothing is published now, but the
+    /// next publication of the object is a Shape (subscribers hold the shape in the old
+    /// frame). Without this, the next mesh (made in the new frame) went out at the old frame's
+    /// pose, off by the distance between the two origins (2–3 cm on the mOSD scene changes).
     pub fn reframe(&mut self, id: u64, world_from_object: Affine3A) {
         let Some(entry) = self.entries.get_mut(&id) else {
             return;
@@ -87,6 +190,7 @@ impl Board {
             for v in &mut mesh.mesh_in_object.vertices {
                 *v = new_from_old.transform_point3(*v);
             }
+            entry.frame_changed = true;
         }
     }
 
@@ -104,57 +208,106 @@ impl Board {
         let Some(entry) = self.entries.get_mut(&id) else {
             return;
         };
+        entry.shape_time = entry.shape_time.max(capture_time);
         entry.mesh = Some(Published {
+            closed: is_closed(&mesh_in_object),
             mesh_in_object,
             stats,
-            capture_time,
         });
-        Self::publish(id, entry, publisher, counters);
+        Self::publish_shape(id, entry, publisher, counters, capture_time);
     }
 
-    fn publish(id: u64, entry: &mut Entry, publisher: &Publisher, counters: &Counters) {
+    fn pose_of(id: u64, entry: &Entry) -> Pose {
+        let (_, rotation, translation) = entry.world_from_object.to_scale_rotation_translation();
+        Pose {
+            object_id: id,
+            shape_version: entry.shape_version,
+            pose_time_ns: nanos(entry.pose_time),
+            pose_time_realtime_ns: realtime_of(entry.pose_time),
+            last_seen_ns: nanos(entry.last_seen.max(entry.pose_time)),
+            rotation: rotation.normalize(),
+            translation,
+            linear_velocity: entry.linear_velocity,
+            angular_velocity: entry.angular_velocity,
+        }
+    }
+
+    fn publish_pose(id: u64, entry: &mut Entry, publisher: &Publisher, counters: &Counters) {
+        if entry.frame_changed {
+            let newest = entry.pose_time.max(entry.last_seen);
+            Self::publish_shape(id, entry, publisher, counters, newest);
+            return;
+        }
+        let started = std::time::Instant::now();
+        match publisher.pose(Self::pose_of(id, entry)) {
+            Ok(()) => {
+                Self::sent(entry);
+                counters.record(Stage::Publish, started.elapsed());
+                // From the frame that prompted it: the move's, or the sighting's.
+                let newest = entry.last_seen.max(entry.pose_time);
+                counters.record_frame_to_publish(monotonic_now().saturating_sub(newest));
+            }
+            Err(err) => tracing::warn!("object {id}: pose not published: {err}"),
+        }
+    }
+
+    /// Publishes the object's shape with its pose; `newest` is the capture time of the data
+    /// that prompted it, for the frame-to-publish latency.
+    fn publish_shape(
+        id: u64,
+        entry: &mut Entry,
+        publisher: &Publisher,
+        counters: &Counters,
+        newest: Duration,
+    ) {
         let Some(mesh) = &entry.mesh else {
             return;
         };
         let started = std::time::Instant::now();
-        entry.version += 1;
-        let pose = entry.world_from_object;
-        let world = TriMesh::new(
-            mesh.mesh_in_object
-                .vertices
-                .iter()
-                .map(|&v| pose.transform_point3(v))
-                .collect(),
-            mesh.mesh_in_object.triangles.clone(),
-        );
-        let upsert = Upsert {
-            object_id: id,
-            version: entry.version,
-            capture_time_ns: mesh.capture_time.as_nanos().min(u64::MAX as u128) as u64,
-            mesh: world,
-            report: mesh.stats,
-        };
-        match publisher.upsert(upsert) {
-            Ok(()) => {
-                counters.record(Stage::Publish, started.elapsed());
-                counters.record_frame_to_publish(monotonic_now().saturating_sub(mesh.capture_time));
-            }
-            Err(err) => tracing::warn!("object {id}: not published: {err}"),
+        entry.shape_version += 1;
+        let mut flags = 0;
+        if mesh.closed {
+            flags |= SHAPE_CLOSED;
         }
+        if id >= FIRST_SUPPORT_ID {
+            flags |= SHAPE_SUPPORT;
+        }
+        let shape = Shape {
+            pose: Self::pose_of(id, entry),
+            shape_time_ns: nanos(entry.shape_time),
+            shape_time_realtime_ns: realtime_of(entry.shape_time),
+            flags,
+            mesh: mesh.mesh_in_object.clone(),
+            report: mesh.stats,
+            encoding: Encoding::Full,
+        };
+        match publisher.shape(shape) {
+            Ok(()) => {
+                entry.frame_changed = false;
+                Self::sent(entry);
+                counters.record(Stage::Publish, started.elapsed());
+                counters.record_frame_to_publish(monotonic_now().saturating_sub(newest));
+            }
+            Err(err) => tracing::warn!("object {id}: shape not published: {err}"),
+        }
+    }
+
+    fn sent(entry: &mut Entry) {
+        entry.last_seen_sent = entry.last_seen.max(entry.pose_time);
+        entry.sent_at = monotonic_now();
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
 
     /// A restarted object's stored mesh stays where it was in the world in its new frame.
     #[test]
     fn reframing_keeps_the_stored_mesh_in_place_in_the_world() {
         let mut board = Board::default();
         let old = Affine3A::from_translation(Vec3::new(1.0, 0.0, 0.0));
-        board.create(7, old);
+        board.create(7, old, Duration::ZERO);
         let vertices = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
         board.entries.get_mut(&7).expect("created").mesh = Some(Published {
             mesh_in_object: TriMesh::new(vertices.clone(), vec![[0, 1, 2]]),
@@ -163,7 +316,7 @@ mod tests {
                 faces_out: 1,
                 max_residual_m: 0.0,
             },
-            capture_time: Duration::ZERO,
+            closed: false,
         });
         let new = Affine3A::from_rotation_translation(
             glam::Quat::from_rotation_z(0.5),
@@ -177,6 +330,65 @@ mod tests {
             let world = new.transform_point3(*v);
             assert!(world.distance(old.transform_point3(*original)) < 1e-5);
         }
-        assert_eq!(entry.version, 0, "nothing published");
+        assert_eq!(entry.shape_version, 0, "nothing published");
+        assert!(entry.frame_changed, "the next publication must be a shape");
+    }
+
+    #[test]
+    fn a_closed_mesh_is_told_from_an_open_one() {
+        let tetrahedron = TriMesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
+            vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+        );
+        assert!(is_closed(&tetrahedron));
+        let open = TriMesh::new(
+            tetrahedron.vertices.clone(),
+            tetrahedron.triangles[..3].to_vec(),
+        );
+        assert!(!is_closed(&open));
+        assert!(!is_closed(&TriMesh::default()));
+    }
+
+    /// A move's velocity is the change from the pose before over the time between them; an
+    /// object seen and not moved stands still.
+    #[test]
+    fn a_move_carries_its_velocity_and_a_still_sighting_zeroes_it() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let publisher = Publisher::bind(tacmesh_publish::PublisherConfig::new(
+            dir.path().join("t.sock"),
+        ))
+        .expect("binds");
+        let counters = Counters::default();
+        let mut board = Board::default();
+        let at = |ms: u64| Duration::from_millis(1000 + ms);
+        board.create(3, Affine3A::IDENTITY, at(0));
+        let mesh = TriMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+        let stats = SimplifyStats {
+            faces_in: 1,
+            faces_out: 1,
+            max_residual_m: 0.0,
+        };
+        board.new_mesh(3, mesh, stats, at(0), &publisher, &counters);
+        let moved = Affine3A::from_rotation_translation(
+            Quat::from_rotation_z(-0.1),
+            Vec3::new(0.01, 0.0, 0.0),
+        );
+        board.move_to(3, moved, at(100), &publisher, &counters);
+        let entry = &board.entries[&3];
+        assert!(entry.linear_velocity.distance(Vec3::new(0.1, 0.0, 0.0)) < 1e-4);
+        assert!(
+            entry.angular_velocity.distance(Vec3::new(0.0, 0.0, -1.0)) < 1e-3,
+            "{}",
+            entry.angular_velocity
+        );
+        assert_eq!(entry.shape_version, 1, "a move is not a new shape");
+        board.seen(3, at(133));
+        let entry = &board.entries[&3];
+        assert_eq!(entry.linear_velocity, Vec3::ZERO);
+        assert_eq!(entry.last_seen, at(133));
+        assert_eq!(entry.pose_time, at(100));
+        // An older frame's estimate does not move the object back in time.
+        board.move_to(3, Affine3A::IDENTITY, at(50), &publisher, &counters);
+        assert_eq!(board.entries[&3].pose_time, at(100));
     }
 }

@@ -218,16 +218,30 @@ impl Counters {
 }
 
 impl CounterSnapshot {
-    /// The wire form of these counters.
-    pub fn to_stats(&self) -> Stats {
+    /// The wire form of these counters, taken at `monotonic_ns` (and the matching wall-clock
+    /// time).
+    pub fn to_stats(&self, monotonic_ns: u64, realtime_ns: u64) -> Stats {
         Stats {
+            monotonic_ns,
+            realtime_ns,
             frames_in: self.ring.pushed,
             frames_dropped: self.ring.dropped,
             invalid_pixels: self.invalid_pixels,
+            malformed_frames: self.malformed_frames,
+            source_errors: self.source_errors,
+            source_restarts: self.source_restarts,
             objects_tracked: self.objects_tracked,
+            objects_born: self.objects_born,
+            objects_removed: self.objects_removed,
             meshing_runs: self.meshing_runs,
-            meshes_published: self.publisher.meshes_published,
+            meshing_failures: self.meshing_failures,
+            shapes_published: self.publisher.shapes_published,
+            poses_published: self.publisher.poses_published,
             bytes_sent: self.publisher.bytes_sent,
+            clients_connected: self.publisher.clients_connected as u64,
+            clients_dropped: self.publisher.clients_dropped,
+            clients_refused: self.publisher.clients_refused,
+            latency_window: WINDOW as u32,
             stage_latencies: self
                 .stages
                 .iter()
@@ -251,8 +265,8 @@ impl CounterSnapshot {
             .collect();
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
-             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, meshes published {}, \
-             bytes sent {}, subscribers {} (dropped {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
+             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, shapes published {}, poses published {}, \
+             bytes sent {}, subscribers {} (dropped {}, refused {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
             self.frames_processed,
@@ -268,10 +282,12 @@ impl CounterSnapshot {
             self.meshing_runs,
             self.meshing_failures,
             self.pose_updates,
-            self.publisher.meshes_published,
+            self.publisher.shapes_published,
+            self.publisher.poses_published,
             self.publisher.bytes_sent,
             self.publisher.clients_connected,
             self.publisher.clients_dropped,
+            self.publisher.clients_refused,
             self.log_lines_dropped,
             self.frame_to_publish_p50_ms,
             self.frame_to_publish_p99_ms,

@@ -293,7 +293,11 @@ impl Daemon {
             }
             next_stats = now + stats_every;
             let snapshot = self.counters();
-            if let Err(err) = self.shared.publisher.stats(snapshot.to_stats()) {
+            let stats = snapshot.to_stats(
+                tacmesh_source::monotonic_now().as_nanos() as u64,
+                tacmesh_source::realtime_now_ns(),
+            );
+            if let Err(err) = self.shared.publisher.stats(stats) {
                 tracing::warn!("stats not sent: {err}");
             }
             if Instant::now() >= next_log {

@@ -363,7 +363,7 @@ impl Fusing {
         {
             let mut board = crate::lock(&shared.board);
             for (id, mesh) in plane_update.upserts {
-                board.create(id, glam::Affine3A::IDENTITY);
+                board.create(id, glam::Affine3A::IDENTITY, capture_time);
                 let faces = mesh.triangles.len() as u32;
                 let stats = tacmesh_protocol::SimplifyStats {
                     faces_in: faces,
@@ -379,7 +379,7 @@ impl Fusing {
             Counters::add(&counters.objects_removed, report.removed.len() as u64);
             for &id in &report.created {
                 if let Some(pose) = self.objects.world_from_object(id) {
-                    board.create(id, pose);
+                    board.create(id, pose, capture_time);
                 }
             }
             for &id in &report.reset {
@@ -391,9 +391,13 @@ impl Fusing {
                 shared.mesh_queue.cancel(id);
                 board.remove(id, &shared.publisher);
             }
+            for &id in report.cluster_ids.iter().flatten() {
+                board.seen(id, capture_time);
+            }
             for &(id, pose) in &report.moved {
                 board.move_to(id, pose, capture_time, &shared.publisher, counters);
             }
+            board.report_sightings(&shared.publisher, counters);
             self.count_confirmed(shared);
         }
         for job in self.objects.take_mesh_jobs(capture_time) {

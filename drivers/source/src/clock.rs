@@ -6,14 +6,29 @@
 
 use std::time::Duration;
 
-/// Now on the host's `CLOCK_MONOTONIC` (time since boot, not counting suspend), the clock of
-/// [`crate::DepthFrame::capture_time`] and of the wire format's `capture_time_ns`.
+/// Now on the host's `CLOCK_MONOTONIC` (time since an arbitrary point near boot, not counting
+/// suspend), the clock of [`crate::DepthFrame::capture_time`] and of the wire format's times.
 pub fn monotonic_now() -> Duration {
     let t = rustix::time::clock_gettime(rustix::time::ClockId::Monotonic);
     Duration::new(
         t.tv_sec.max(0) as u64,
         t.tv_nsec.clamp(0, 999_999_999) as u32,
     )
+}
+
+/// Now on the host's `CLOCK_REALTIME`, nanoseconds since the Unix epoch (0 for a clock set
+/// before it): the wire format gives times on it too, for a client on another host.
+pub fn realtime_now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |since| since.as_nanos().min(u64::MAX as u128) as u64)
+}
+
+/// The `CLOCK_REALTIME` nanoseconds of the `CLOCK_MONOTONIC` instant `monotonic`, by the two
+/// clocks' offset now (a wall clock stepped since `monotonic` shifts the answer with it).
+pub fn realtime_of(monotonic: Duration) -> u64 {
+    let offset = realtime_now_ns() as i128 - monotonic_now().as_nanos() as i128;
+    (monotonic.as_nanos() as i128 + offset).clamp(0, u64::MAX as i128) as u64
 }
 
 #[cfg(test)]

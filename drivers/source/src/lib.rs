@@ -6,7 +6,8 @@
 //! - [`PointCloud`]: points (and optional normals) in metres, in one named frame; with a
 //!   [`CloudGrid`] when it is organised.
 //! - [`TriMesh`]: an indexed triangle mesh in metres.
-//! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read.
+//! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read;
+//!   [`realtime_now_ns`], [`realtime_of`]: the wall clock, for clients on other hosts.
 //!
 //! This crate is a leaf: backends, the simulator and the daemon depend on it, it depends on
 //! nothing of theirs.
@@ -17,7 +18,7 @@ mod frame;
 mod mesh;
 mod source;
 
-pub use clock::monotonic_now;
+pub use clock::{monotonic_now, realtime_now_ns, realtime_of};
 pub use cloud::{CloudGrid, PointCloud};
 pub use frame::{Deprojection, DepthFrame, FrameError, Intrinsics};
 pub use mesh::TriMesh;

@@ -1,0 +1,468 @@
+//! Every claim of `docs/protocol.md` that a client can check, against the real daemon on the
+//! demo scene (the cone slides all the time, a cylinder comes and goes): the conversation's
+//! order, the clocks, times that never go backwards, moves as 97-byte Poses with a velocity,
+//! support planes flagged and facing the objects, the closed flag, the compact encoding and the
+//! kind filter, the Stats counters, and the refusal of a version-1 client.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::io::{Read, Write};
+use std::os::unix::net::UnixStream;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use tacmesh::glam::Vec3;
+use tacmesh::protocol::{
+    encode, Encoding, FrameDecoder, Kinds, Message, Scene, Sender, Shape, Stats, Subscribe,
+    FIRST_SUPPORT_ID,
+};
+use tacmesh::source::monotonic_now;
+use tacmesh::subscriber::Subscription;
+use tacmesh::TriMesh;
+
+use crate::daemon::ONE_DAEMON_AT_A_TIME;
+use crate::reliability::Run;
+
+const RUN: Duration = Duration::from_secs(12);
+
+/// What one subscriber read: each message with its frame size and our monotonic time then.
+struct Read1 {
+    messages: Vec<(u64, usize, Message)>,
+}
+
+fn read_for(mut subscription: Subscription, how_long: Duration) -> Read1 {
+    let until = Instant::now() + how_long;
+    let mut messages = Vec::new();
+    let mut frame = Vec::new();
+    while Instant::now() < until {
+        let message = subscription.next_message().expect("the subscription");
+        frame.clear();
+        // The decoded message, encoded again, in the encoding it came in: the frame's size.
+        encode(&message, &mut frame).expect("what was decoded encodes");
+        messages.push((monotonic_now().as_nanos() as u64, frame.len(), message));
+    }
+    Read1 { messages }
+}
+
+fn centroid(mesh: &TriMesh) -> Vec3 {
+    mesh.vertices.iter().copied().sum::<Vec3>() / mesh.vertices.len().max(1) as f32
+}
+
+fn is_closed(mesh: &TriMesh) -> bool {
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    !edges.is_empty() && edges.values().all(|&n| n == 2)
+}
+
+fn realtime_now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .expect("after 1970")
+        .as_nanos() as u64
+}
+
+#[test]
+fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut daemon = Run::start(&["--sensor", "sim:demo"], &dir.path().join("t.sock"));
+    let full = daemon.subscribe();
+    let compact = daemon.subscribe_with(Subscribe {
+        encoding: Encoding::Compact,
+        resend: true,
+        ..Subscribe::default()
+    });
+    let supports = daemon.subscribe_with(Subscribe {
+        kinds: Kinds::SUPPORTS,
+        resend: true,
+        ..Subscribe::default()
+    });
+    let readers: Vec<_> = [full, compact, supports]
+        .into_iter()
+        .map(|s| std::thread::spawn(move || read_for(s, RUN)))
+        .collect();
+
+    // A version-1 client: it can read the Hello (its layout is frozen) and sees version 2;
+    // the one that sends its empty Subscribe anyway is told why in a Goodbye.
+    std::thread::sleep(Duration::from_secs(3));
+    let mut old = UnixStream::connect(daemon.socket()).expect("connects");
+    old.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    old.write_all(&[1, 0, 0, 0, 0x80]).expect("sends");
+    let mut decoder = FrameDecoder::new(Sender::Server);
+    let mut bytes = Vec::new();
+    old.read_to_end(&mut bytes)
+        .expect("the daemon closes the connection");
+    decoder.push(&bytes);
+    let mut old_read = Vec::new();
+    while let Ok(Some(message)) = decoder.next_message() {
+        old_read.push(message);
+    }
+    match old_read.first() {
+        Some(Message::Hello {
+            protocol_version, ..
+        }) => assert_eq!(*protocol_version, 2),
+        other => panic!("a version-1 client's first message: {other:?}"),
+    }
+    match old_read.last() {
+        Some(Message::Goodbye { reason }) => {
+            assert!(reason.contains("protocol version 2"), "{reason}")
+        }
+        other => panic!("a version-1 client's last message: {other:?}"),
+    }
+
+    let mut read: Vec<Read1> = readers
+        .into_iter()
+        .map(|r| r.join().expect("a reader"))
+        .collect();
+    assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
+    let (status, _) = daemon.terminate();
+    assert!(status.success(), "{status}");
+    let supports_read = read.pop().expect("three readers");
+    let compact_read = read.pop().expect("three readers");
+    let full_read = read.pop().expect("three readers");
+
+    check_conversation_and_times(&full_read);
+    let moving = check_moves_are_poses(&full_read);
+    check_supports_and_closed_flags(&full_read);
+    check_stats(&full_read);
+    check_compact_against_full(&compact_read, &full_read, moving);
+    check_kind_filter(&supports_read);
+}
+
+/// Hello, Session (both clocks now), Shapes, SnapshotDone; then per object: versions, shape
+/// time, pose time and last seen never go backwards, last seen is never before the pose time,
+/// and a Pose names the shape version the client holds.
+fn check_conversation_and_times(read: &Read1) {
+    // The subscription read the Hello and checked its version.
+    let kinds: Vec<&str> = read.messages.iter().map(|(_, _, m)| m.name()).collect();
+    let (received_ns, _, session) = &read.messages[0];
+    let Message::Session(session) = session else {
+        panic!("the first message after Hello is {}, not Session", kinds[0]);
+    };
+    assert_eq!(session.options, Subscribe::default());
+    assert!(
+        received_ns.abs_diff(session.monotonic_ns) < 2_000_000_000,
+        "Session's monotonic clock {} is not ours {received_ns}",
+        session.monotonic_ns
+    );
+    assert!(
+        realtime_now_ns().abs_diff(session.realtime_ns) < RUN.as_nanos() as u64 + 2_000_000_000,
+        "Session's wall clock is off"
+    );
+    let done = kinds
+        .iter()
+        .position(|&k| k == "SnapshotDone")
+        .expect("a SnapshotDone");
+    assert!(
+        kinds[1..done].iter().all(|&k| k == "Shape" || k == "Pose"),
+        "{kinds:?}"
+    );
+
+    // (shape version, shape time, pose time, last seen) of each object.
+    let mut held: HashMap<u64, (u64, u64, u64, u64)> = HashMap::new();
+    let mut updates = 0;
+    for (_, _, message) in &read.messages {
+        let (id, version, shape_time, pose) = match message {
+            Message::Shape(s) => (s.object_id(), s.version(), Some(s.shape_time_ns), s.pose),
+            Message::Pose(p) => (p.object_id, p.shape_version, None, *p),
+            Message::Remove { object_id } => {
+                held.remove(object_id);
+                continue;
+            }
+            _ => continue,
+        };
+        updates += 1;
+        assert!(
+            pose.last_seen_ns >= pose.pose_time_ns,
+            "object {id}: {pose:?}"
+        );
+        match held.get(&id) {
+            None => assert!(shape_time.is_some(), "object {id}: a Pose before its Shape"),
+            Some(&(held_version, held_shape_time, pose_time, last_seen)) => {
+                match shape_time {
+                    Some(t) => {
+                        assert!(
+                            version > held_version,
+                            "object {id}: shape version went back"
+                        );
+                        assert!(t >= held_shape_time, "object {id}: shape time went back");
+                    }
+                    None => assert_eq!(
+                        version, held_version,
+                        "object {id}: a Pose of another shape"
+                    ),
+                }
+                assert!(
+                    pose.pose_time_ns >= pose_time,
+                    "object {id}: pose time went back"
+                );
+                assert!(
+                    pose.last_seen_ns >= last_seen,
+                    "object {id}: last seen went back"
+                );
+            }
+        }
+        let shape_time = shape_time.unwrap_or_else(|| held[&id].1);
+        held.insert(
+            id,
+            (version, shape_time, pose.pose_time_ns, pose.last_seen_ns),
+        );
+    }
+    assert!(updates > 50, "only {updates} updates in {RUN:?}");
+}
+
+/// The sliding cone's moves come as Poses of 97 bytes with the velocity it slides at (0.1 m/s
+/// along x), far more of them than its Shapes. Returns its id.
+fn check_moves_are_poses(read: &Read1) -> u64 {
+    let mut scene = Scene::new();
+    let mut path: BTreeMap<u64, (f32, f32)> = BTreeMap::new();
+    let mut counts: HashMap<u64, (usize, usize)> = HashMap::new();
+    let mut speeds: HashMap<u64, Vec<f32>> = HashMap::new();
+    for (_, size, message) in &read.messages {
+        scene.apply(message);
+        match message {
+            Message::Pose(p) => {
+                assert_eq!(*size, 97, "a Pose frame");
+                counts.entry(p.object_id).or_default().1 += 1;
+                if p.linear_velocity != Vec3::ZERO {
+                    speeds
+                        .entry(p.object_id)
+                        .or_default()
+                        .push(p.linear_velocity.length());
+                }
+            }
+            Message::Shape(s) => counts.entry(s.object_id()).or_default().0 += 1,
+            _ => {}
+        }
+        if let Message::Shape(_) | Message::Pose(_) = message {
+            let id = match message {
+                Message::Shape(s) => s.object_id(),
+                Message::Pose(p) => p.object_id,
+                _ => unreachable!(),
+            };
+            if let Some(mesh) = scene.world_mesh(id) {
+                let x = centroid(&mesh).x;
+                let range = path.entry(id).or_insert((x, x));
+                range.0 = range.0.min(x);
+                range.1 = range.1.max(x);
+            }
+        }
+    }
+    let moving: Vec<u64> = path
+        .iter()
+        .filter(|(&id, &(lo, hi))| id < FIRST_SUPPORT_ID && hi - lo > 0.3)
+        .map(|(&id, _)| id)
+        .collect();
+    assert_eq!(moving.len(), 1, "objects that crossed the table: {path:?}");
+    let cone = moving[0];
+    let (shapes, poses) = counts[&cone];
+    eprintln!("the cone (object {cone}): {shapes} shapes, {poses} poses in {RUN:?}");
+    assert!(poses >= 60, "only {poses} poses of the sliding cone");
+    assert!(
+        shapes * 3 <= poses,
+        "{shapes} shapes for {poses} poses: moves resend meshes"
+    );
+    let mut cone_speeds = speeds.remove(&cone).unwrap_or_default();
+    cone_speeds.sort_by(f32::total_cmp);
+    let median = cone_speeds[cone_speeds.len() / 2];
+    eprintln!(
+        "the cone's speed: median {median:.3} m/s over {} poses",
+        cone_speeds.len()
+    );
+    assert!(
+        (0.05..0.2).contains(&median),
+        "the cone slides at 0.1 m/s; its poses say {median:.3} m/s"
+    );
+    cone
+}
+
+/// Support planes, and only they, carry the support flag, and their fans face the objects
+/// standing on them; the closed flag says whether every edge is shared by two triangles.
+fn check_supports_and_closed_flags(read: &Read1) {
+    let mut scene = Scene::new();
+    let mut closed_checked = 0;
+    for (_, _, message) in &read.messages {
+        scene.apply(message);
+        if let Message::Shape(shape) = message {
+            assert_eq!(
+                shape.is_support(),
+                shape.object_id() >= FIRST_SUPPORT_ID,
+                "object {}: the support flag",
+                shape.object_id()
+            );
+            if !shape.is_support() {
+                assert_eq!(
+                    shape.is_closed(),
+                    is_closed(&shape.mesh),
+                    "object {}",
+                    shape.object_id()
+                );
+                closed_checked += 1;
+            }
+        }
+    }
+    assert!(closed_checked > 3);
+    let objects: Vec<Vec3> = scene
+        .objects()
+        .filter(|o| o.object_id() < FIRST_SUPPORT_ID)
+        .map(|o| centroid(&o.world_mesh()))
+        .collect();
+    let planes: Vec<TriMesh> = scene
+        .objects()
+        .filter(|o| o.object_id() >= FIRST_SUPPORT_ID)
+        .map(|o| o.world_mesh())
+        .collect();
+    assert!(
+        !planes.is_empty() && objects.len() >= 3,
+        "{} planes, {} objects",
+        planes.len(),
+        objects.len()
+    );
+    for plane in &planes {
+        let [a, b, c] = plane.corners(0);
+        let up = (b - a).cross(c - a).normalize();
+        for (k, o) in objects.iter().enumerate() {
+            assert!(
+                up.dot(*o - a) > 0.0,
+                "object {k} at {o} is below the support's up side {up}"
+            );
+        }
+    }
+}
+
+/// Stats: the latency window is stated, clocks advance, counters never go back, and the
+/// shapes and poses published (summed over subscribers) cover what this one read.
+fn check_stats(read: &Read1) {
+    let mut received = (0u64, 0u64);
+    let mut previous: Option<(&Stats, (u64, u64))> = None;
+    let mut seen = 0;
+    for (_, _, message) in &read.messages {
+        match message {
+            Message::Shape(_) => received.0 += 1,
+            Message::Pose(_) => received.1 += 1,
+            Message::Stats(stats) => {
+                seen += 1;
+                assert_eq!(stats.latency_window, 2048);
+                if let Some((before, received_before)) = previous {
+                    assert!(stats.monotonic_ns > before.monotonic_ns);
+                    assert!(stats.realtime_ns > before.realtime_ns);
+                    assert!(stats.frames_in >= before.frames_in);
+                    // What this subscriber read before the previous Stats was written before
+                    // these were taken.
+                    assert!(stats.shapes_published >= received_before.0, "{stats:?}");
+                    assert!(stats.poses_published >= received_before.1, "{stats:?}");
+                    assert!(stats.bytes_sent >= before.bytes_sent);
+                }
+                previous = Some((stats, received));
+            }
+            _ => {}
+        }
+    }
+    assert!(
+        seen >= RUN.as_secs() as usize - 2,
+        "only {seen} Stats in {RUN:?}"
+    );
+    let (last, _) = previous.expect("Stats");
+    assert!(last.clients_connected >= 3, "{last:?}");
+    assert!(
+        last.clients_dropped >= 1,
+        "the version-1 client was not counted: {last:?}"
+    );
+    assert!(last.objects_tracked >= 4 && last.meshing_runs > 0 && last.frames_in > 100);
+}
+
+/// The compact subscriber's second snapshot and everything after are compact, the same shapes
+/// within the stated residual, at under 60 % of the bytes per face.
+fn check_compact_against_full(compact: &Read1, full: &Read1, cone: u64) {
+    let sessions = compact
+        .messages
+        .iter()
+        .filter(|(_, _, m)| matches!(m, Message::Session(_)))
+        .count();
+    assert_eq!(
+        sessions, 2,
+        "the first snapshot and the one the Subscribe asked for"
+    );
+    let by_version = |read: &Read1, encoding: Encoding| -> HashMap<(u64, u64), (usize, Shape)> {
+        read.messages
+            .iter()
+            .filter_map(|(_, size, m)| match m {
+                Message::Shape(s) if s.encoding == encoding && !s.is_support() => {
+                    Some(((s.object_id(), s.version()), (*size, s.clone())))
+                }
+                _ => None,
+            })
+            .collect()
+    };
+    let compact_shapes = by_version(compact, Encoding::Compact);
+    let full_shapes = by_version(full, Encoding::Full);
+    let mut compared = 0;
+    let (mut compact_bytes, mut full_bytes, mut faces) = (0usize, 0usize, 0usize);
+    for (key, (size, shape)) in &compact_shapes {
+        let Some((full_size, full_shape)) = full_shapes.get(key) else {
+            continue;
+        };
+        compared += 1;
+        compact_bytes += size;
+        full_bytes += full_size;
+        faces += shape.mesh.triangles.len();
+        assert_eq!(shape.mesh.triangles, full_shape.mesh.triangles);
+        assert!(shape.report.max_residual_m >= full_shape.report.max_residual_m);
+        let bound = shape.report.max_residual_m - full_shape.report.max_residual_m + 1e-6;
+        for (a, b) in shape.mesh.vertices.iter().zip(&full_shape.mesh.vertices) {
+            assert!(
+                a.distance(*b) <= bound,
+                "object {}: {a} vs {b}, bound {bound}",
+                key.0
+            );
+        }
+    }
+    assert!(compared >= 3, "only {compared} shapes in both streams");
+    eprintln!(
+        "{compared} shapes in both encodings: {:.1} bytes a face compact, {:.1} full",
+        compact_bytes as f64 / faces as f64,
+        full_bytes as f64 / faces as f64
+    );
+    assert!(compact_bytes * 10 < full_bytes * 6);
+    let compact_poses = compact
+        .messages
+        .iter()
+        .filter(|(_, _, m)| matches!(m, Message::Pose(p) if p.object_id == cone))
+        .count();
+    assert!(
+        compact_poses >= 60,
+        "the compact subscriber got {compact_poses} poses of the cone"
+    );
+}
+
+/// After the Session its Subscribe asked for, a supports-only subscriber gets nothing of the
+/// objects.
+fn check_kind_filter(read: &Read1) {
+    let second = read
+        .messages
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, _, m))| matches!(m, Message::Session(_)))
+        .nth(1)
+        .map(|(k, _)| k)
+        .expect("a second Session");
+    let ids: HashSet<u64> = read.messages[second..]
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            Message::Shape(s) => Some(s.object_id()),
+            Message::Pose(p) => Some(p.object_id),
+            Message::Remove { object_id } => Some(*object_id),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        !ids.is_empty(),
+        "no support reached the supports-only subscriber"
+    );
+    assert!(ids.iter().all(|&id| id >= FIRST_SUPPORT_ID), "{ids:?}");
+}
