@@ -10,7 +10,8 @@
 //! frames dropped, frame-to-publish latency p50/p99, per-stage p50/p99 (from the daemon's last
 //! Stats message), peak RSS (VmHWM from /proc), bytes per second on the socket, and what one
 //! subscriber saw (shapes, poses, removes and their bytes, data age at arrival). With
-//! `BENCH_ENCODING=compact` in the environment the subscriber asks for compact shapes.
+//! `BENCH_ENCODING=compact` in the environment the subscriber asks for compact shapes, with
+//! `BENCH_MAX_RATE_HZ=N` for at most N updates a second per object.
 //! Prints a Markdown table for BENCHMARKS.md. Not a test: nothing here asserts a time.
 
 mod support;
@@ -51,9 +52,14 @@ fn main() {
         Ok("compact") => Encoding::Compact,
         _ => Encoding::Full,
     };
-    let options = (encoding == Encoding::Compact).then(|| Subscribe {
+    let max_rate_hz: f32 = std::env::var("BENCH_MAX_RATE_HZ")
+        .ok()
+        .and_then(|rate| rate.parse().ok())
+        .unwrap_or(0.0);
+    let options = (encoding == Encoding::Compact || max_rate_hz > 0.0).then(|| Subscribe {
         encoding,
         resend: true,
+        max_rate_hz,
         ..Subscribe::default()
     });
     let mut subscription =
@@ -152,7 +158,10 @@ fn main() {
     };
     let pct = |q: f64| pct_of(&ages_ms, q);
 
-    println!("\n## tacmesh run, {sensor}, {seconds:.0} s, {encoding:?} encoding (exit {status})\n");
+    println!(
+        "\n## tacmesh run, {sensor}, {seconds:.0} s, {encoding:?} encoding, rate cap {max_rate_hz} Hz \
+         (exit {status})\n"
+    );
     println!("| measure | value |\n|---|---|");
     println!("| frames from sensor | {} ({fps:.1} fps) |", s1.frames_in);
     println!("| frames processed | {:.1} fps |", processed_fps);
