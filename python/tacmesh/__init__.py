@@ -1,40 +1,77 @@
-"""A client for the tacmesh daemon: its meshes as typed messages with numpy arrays.
+"""A client for the tacmesh daemon (protocol version 2): typed messages with numpy arrays, the
+current scene, reconnection.
 
 See README.md beside this package, and docs/protocol.md in the repository for the wire format.
 """
 
-from .subscriber import Refused, Scene, SceneObject, Subscriber, VersionMismatch
+from .subscriber import (
+    Mesh,
+    Refused,
+    Scene,
+    SceneObject,
+    Subscriber,
+    VersionMismatch,
+    local_age_s,
+    options_of,
+    remote_age_s,
+)
 from .wire import (
+    DEFAULT_OPTIONS,
     FIRST_PLANE_ID,
+    FIRST_SUPPORT_ID,
+    PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
+    Encoding,
     FrameDecoder,
     Goodbye,
     Hello,
+    Kinds,
     Message,
+    Pose,
     ProtocolError,
     Remove,
+    Session,
+    Shape,
     SnapshotDone,
     StageLatency,
     Stats,
-    Upsert,
+    Subscribe,
+    SubscribeV1,
+    WireError,
+    encode,
 )
 
 __all__ = [
+    "DEFAULT_OPTIONS",
     "FIRST_PLANE_ID",
+    "FIRST_SUPPORT_ID",
+    "PROTOCOL_VERSION",
     "SUPPORTED_VERSIONS",
+    "Encoding",
     "FrameDecoder",
     "Goodbye",
     "Hello",
+    "Kinds",
+    "Mesh",
     "Message",
+    "Pose",
     "ProtocolError",
     "Refused",
     "Remove",
     "Scene",
     "SceneObject",
+    "Session",
+    "Shape",
     "SnapshotDone",
     "StageLatency",
     "Stats",
+    "Subscribe",
+    "SubscribeV1",
     "Subscriber",
-    "Upsert",
     "VersionMismatch",
+    "WireError",
+    "encode",
+    "local_age_s",
+    "options_of",
+    "remote_age_s",
 ]

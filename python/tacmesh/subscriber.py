@@ -1,35 +1,49 @@
 """Subscribing to a running daemon over its Unix socket, and keeping the current scene.
 
->>> from tacmesh import Subscriber, Scene
->>> scene = Scene()
->>> for message in Subscriber("/run/tacmesh/tacmesh.sock"):  # doctest: +SKIP
-...     scene.apply(message)
-...     print(len(scene.objects), "objects")
+>>> from tacmesh import Subscriber
+>>> with Subscriber("/run/tacmesh/tacmesh.sock", encoding="compact") as sub:  # doctest: +SKIP
+...     for message in sub:
+...         print(len(sub.scene.objects), "objects")
 """
 
 from __future__ import annotations
 
+import logging
 import socket
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
+from typing import NamedTuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from .wire import (
+    DEFAULT_OPTIONS,
+    FIRST_SUPPORT_ID,
+    PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
+    Encoding,
     FrameDecoder,
     Goodbye,
     Hello,
+    Kinds,
     Message,
-    ProtocolError,
+    Pose,
     Remove,
+    Session,
+    Shape,
     SnapshotDone,
-    Upsert,
+    Stats,
+    Subscribe,
+    SubscribeV1,
+    WireError,
     encode_subscribe,
 )
+
+log = logging.getLogger("tacmesh")
 
 
 class Refused(ConnectionError):
@@ -40,17 +54,243 @@ class VersionMismatch(ConnectionError):
     """The daemon speaks a protocol version this client does not read."""
 
 
-class Subscriber:
-    """The daemon's messages, in order, as an iterator.
+class Mesh(NamedTuple):
+    #: ``float32 (V, 3)``, metres.
+    vertices: npt.NDArray[np.float32]
+    #: ``uint32 (T, 3)``.
+    triangles: npt.NDArray[np.uint32]
 
-    The first message of every connection is a :class:`~tacmesh.wire.Hello` (checked: a version
-    this client does not read raises :class:`VersionMismatch`), then the snapshot's Upserts,
-    SnapshotDone, and updates. With ``reconnect`` (the default), a lost connection or the
-    daemon's Goodbye is followed by new attempts with exponential backoff (``backoff_s`` doubling
-    up to ``max_backoff_s``), and the next connection starts again with its Hello and a full
-    snapshot (:class:`Scene` starts afresh on a Hello). Without it, iteration ends after a
-    Goodbye or when the connection closes. A frame that breaks the protocol raises
-    :class:`~tacmesh.wire.ProtocolError` either way: a daemon sending garbage is not retried.
+
+@dataclass(frozen=True, eq=False)
+class SceneObject:
+    """One object (or support plane) as the scene holds it: its latest shape and the latest
+    pose for that shape."""
+
+    shape: Shape
+    pose: Pose
+
+    @property
+    def object_id(self) -> int:
+        return self.shape.object_id
+
+    @property
+    def shape_version(self) -> int:
+        return self.shape.shape_version
+
+    #: The name version 1 of this package used.
+    version = shape_version
+
+    @property
+    def is_support(self) -> bool:
+        """A support plane (a table or floor): its Shape's flag, or an id from 2^32."""
+        return self.shape.is_support or self.object_id >= FIRST_SUPPORT_ID
+
+    #: The name version 1 of this package used.
+    is_plane = is_support
+
+    @property
+    def vertices(self) -> npt.NDArray[np.float32]:
+        """``float32 (V, 3)`` in the object's frame."""
+        return self.shape.vertices
+
+    @property
+    def triangles(self) -> npt.NDArray[np.uint32]:
+        return self.shape.triangles
+
+    @property
+    def max_residual_m(self) -> float:
+        return self.shape.max_residual_m
+
+    @cached_property
+    def world_vertices(self) -> npt.NDArray[np.float32]:
+        """``float32 (V, 3)``: the shape's vertices mapped by the pose (``world_from_object``)."""
+        return self.pose.to_world(self.shape.vertices)
+
+    @property
+    def mesh(self) -> Mesh:
+        """The object's mesh in the world frame."""
+        return Mesh(self.world_vertices, self.shape.triangles)
+
+    @property
+    def shape_time_ns(self) -> int:
+        return self.shape.shape_time_ns
+
+    @property
+    def pose_time_ns(self) -> int:
+        return self.pose.pose_time_ns
+
+    @property
+    def last_seen_ns(self) -> int:
+        return self.pose.last_seen_ns
+
+
+class Scene:
+    """What the daemon says is there now, by the document's rules.
+
+    - A Hello (a new connection) or a Session (a new snapshot) empties the scene; the Shapes up
+      to SnapshotDone are the scene, and ``complete`` is True from SnapshotDone on.
+    - Per object the Shape of the highest ``shape_version`` is kept (an older one is stale and
+      ignored), with its own pose.
+    - A Pose applies only to the shape version it names (another is stale and ignored), and
+      never takes an object's pose time or last-seen time backwards.
+    - A Remove forgets the object.
+
+    ``stale`` counts the Shapes and Poses ignored. ``session`` and ``stats`` are the latest of
+    each; :meth:`realtime_ns` maps a monotonic time of the stream onto the daemon's wall clock.
+    """
+
+    def __init__(self) -> None:
+        self.objects: dict[int, SceneObject] = {}
+        self.complete = False
+        self.session: Session | None = None
+        self.stats: Stats | None = None
+        self.stale = 0
+        self._realtime_offset_ns: int | None = None
+
+    def apply(self, message: Message) -> None:
+        if isinstance(message, Hello):
+            self.clear()
+        elif isinstance(message, Session):
+            self.clear()
+            self.session = message
+            self._realtime_offset_ns = message.realtime_offset_ns
+        elif isinstance(message, Shape):
+            self._shape(message)
+        elif isinstance(message, Pose):
+            self._pose(message)
+        elif isinstance(message, Remove):
+            self.objects.pop(message.object_id, None)
+        elif isinstance(message, SnapshotDone):
+            self.complete = True
+        elif isinstance(message, Stats):
+            self.stats = message
+            self._realtime_offset_ns = message.realtime_offset_ns
+
+    def clear(self) -> None:
+        self.objects.clear()
+        self.complete = False
+
+    def keep_only(self, options: Subscribe) -> None:
+        """Forgets the objects outside the filter of ``options`` (its kinds and ids): what a
+        client does after a Subscribe without ``resend``."""
+        for object_id in [i for i in self.objects if not options.admits(i)]:
+            del self.objects[object_id]
+
+    def _shape(self, shape: Shape) -> None:
+        held = self.objects.get(shape.object_id)
+        if held is not None and shape.shape_version < held.shape_version:
+            self.stale += 1
+            return
+        if held is not None and shape.shape_version == held.shape_version:
+            # The same shape again: its pose is news only if it is newer.
+            self._pose(shape.pose)
+            return
+        self.objects[shape.object_id] = SceneObject(shape, shape.pose)
+
+    def _pose(self, pose: Pose) -> None:
+        held = self.objects.get(pose.object_id)
+        if (
+            held is None
+            or pose.shape_version != held.shape_version
+            or pose.pose_time_ns < held.pose.pose_time_ns
+            or pose.last_seen_ns < held.pose.last_seen_ns
+        ):
+            self.stale += 1
+            return
+        self.objects[pose.object_id] = SceneObject(held.shape, pose)
+
+    def realtime_ns(self, monotonic_ns: int) -> int | None:
+        """A monotonic time of the stream on the daemon's wall clock (``CLOCK_REALTIME``), by
+        the latest Session or Stats; None before either."""
+        if self._realtime_offset_ns is None:
+            return None
+        return monotonic_ns + self._realtime_offset_ns
+
+    @property
+    def supports(self) -> list[SceneObject]:
+        return [o for o in self.objects.values() if o.is_support]
+
+    @property
+    def non_supports(self) -> list[SceneObject]:
+        return [o for o in self.objects.values() if not o.is_support]
+
+
+def local_age_s(monotonic_ns: int) -> float:
+    """The age of a time of the stream, for a client on the daemon's host: its own
+    ``time.monotonic_ns()`` minus the time (both ``CLOCK_MONOTONIC``)."""
+    return (time.monotonic_ns() - monotonic_ns) * 1e-9
+
+
+def remote_age_s(realtime_ns: int) -> float:
+    """The age of a realtime field (``…_realtime_ns``), for a client on another host whose wall
+    clock is synchronised with the daemon's: its ``time.time_ns()`` minus the time."""
+    return (time.time_ns() - realtime_ns) * 1e-9
+
+
+EncodingName = Union[str, Encoding]
+KindName = Union[str, Kinds]
+
+
+def options_of(
+    *,
+    encoding: EncodingName = "full",
+    max_rate_hz: float = 0.0,
+    kinds: Iterable[KindName] | KindName = ("objects", "supports"),
+    object_ids: Iterable[int] = (),
+    resend: bool = False,
+) -> Subscribe:
+    """A :class:`~tacmesh.wire.Subscribe` from friendly values: ``encoding`` ``"full"`` or
+    ``"compact"``, ``kinds`` any of ``"objects"``, ``"supports"``."""
+    if isinstance(encoding, str):
+        try:
+            encoding = Encoding[encoding.upper()]
+        except KeyError:
+            raise ValueError(f"encoding {encoding!r}: it is 'full' or 'compact'") from None
+    if isinstance(kinds, (str, Kinds)):
+        kinds = [kinds]
+    bits = Kinds(0)
+    for kind in kinds:
+        if isinstance(kind, str):
+            try:
+                kind = Kinds[kind.upper()]
+            except KeyError:
+                raise ValueError(f"kind {kind!r}: it is 'objects' or 'supports'") from None
+        bits |= kind
+    if not bits:
+        raise ValueError("kinds: ask for 'objects', 'supports' or both")
+    if not (max_rate_hz >= 0.0 and np.isfinite(max_rate_hz)):
+        raise ValueError(f"max_rate_hz {max_rate_hz}: it is finite and >= 0 (0 for no cap)")
+    return Subscribe(
+        encoding=Encoding(encoding),
+        resend=resend,
+        max_rate_hz=float(max_rate_hz),
+        kinds=bits,
+        object_ids=tuple(int(i) for i in object_ids),
+    )
+
+
+class Subscriber:
+    """The daemon's messages, in order, as an iterator, and the scene they describe.
+
+    Each connection starts with a :class:`~tacmesh.wire.Hello`, checked: another protocol
+    version raises :class:`VersionMismatch` (naming both versions), a Goodbye instead of it
+    raises :class:`Refused` with the daemon's reason. Then the client sends a Subscribe with its
+    options (``encoding`` ``"full"`` or ``"compact"``, ``max_rate_hz``, ``kinds``,
+    ``object_ids``), with ``resend`` when they differ from the defaults: the daemon's first
+    snapshot (under the defaults) is then not yielded, and the scene is taken from the Session
+    that answers the Subscribe. More generally, messages sent under options this client has
+    since replaced (up to the Session of the new options) are skipped, Stats excepted, as are
+    updates of objects outside the filter.
+
+    ``scene`` is the :class:`Scene` of everything yielded so far. :meth:`subscribe` changes the
+    options (by default with a fresh snapshot), :meth:`resend` asks for a fresh snapshot.
+
+    With ``reconnect`` (the default), a lost connection or the daemon's Goodbye is logged (the
+    ``tacmesh`` logger) and followed by new attempts with exponential backoff (``backoff_s``
+    doubling up to ``max_backoff_s``); the next connection starts again with its Hello and a
+    snapshot, and the options are sent again. Without it, iteration ends after a Goodbye or
+    when the connection closes. A frame that breaks the protocol raises a
+    :class:`~tacmesh.wire.WireError` either way: a daemon sending garbage is not retried.
 
     ``timeout_s`` bounds each wait for data (None: wait for ever); a timeout raises
     :class:`TimeoutError`.
@@ -60,6 +300,10 @@ class Subscriber:
         self,
         path: str | Path,
         *,
+        encoding: EncodingName = "full",
+        max_rate_hz: float = 0.0,
+        kinds: Iterable[KindName] | KindName = ("objects", "supports"),
+        object_ids: Iterable[int] = (),
         reconnect: bool = True,
         timeout_s: float | None = None,
         backoff_s: float = 0.1,
@@ -67,17 +311,82 @@ class Subscriber:
         send_subscribe: bool = True,
     ) -> None:
         self.path = Path(path)
+        #: The options asked for (``resend`` False: it is set on each Subscribe as needed).
+        self.options = options_of(
+            encoding=encoding, max_rate_hz=max_rate_hz, kinds=kinds, object_ids=object_ids
+        )
+        if not send_subscribe and not self.options.same_options(DEFAULT_OPTIONS):
+            raise ValueError("options other than the defaults need send_subscribe")
         self.reconnect = reconnect
         self.timeout_s = timeout_s
         self.backoff_s = backoff_s
         self.max_backoff_s = max_backoff_s
         self.send_subscribe = send_subscribe
+        #: The scene of the messages yielded so far.
+        self.scene = Scene()
         #: Connections made so far.
         self.connections = 0
+        #: The daemon's Hello on the current (or last) connection.
+        self.hello: Hello | None = None
+        #: Bytes received on all connections, and the size of the last frame yielded.
+        self.bytes_received = 0
+        self.last_frame_bytes = 0
+        #: Messages received and not yielded: sent under options since replaced (``skipped``),
+        #: or about objects outside the filter (``filtered``: sent before the daemon read it).
+        self.skipped = 0
+        self.filtered = 0
         self._sock: socket.socket | None = None
         self._decoder = FrameDecoder()
         self._expect_hello = True
         self._finished = False
+        # Sessions to come before the one that answers this client's latest options.
+        self._sessions_to_skip = 0
+        self._awaiting: Subscribe | None = None
+        self._lost: str | None = None
+
+    # -- changing what is sent ----------------------------------------------------------------
+
+    def subscribe(
+        self,
+        *,
+        encoding: EncodingName | None = None,
+        max_rate_hz: float | None = None,
+        kinds: Iterable[KindName] | KindName | None = None,
+        object_ids: Iterable[int] | None = None,
+        resend: bool = True,
+    ) -> None:
+        """Changes the options (those given; the others stay) and sends them. With ``resend``
+        (the default) the daemon sends a fresh snapshot under them, which replaces the scene;
+        without it the scene forgets the objects outside the new filter."""
+        old = self.options
+        self.options = options_of(
+            encoding=old.encoding if encoding is None else encoding,
+            max_rate_hz=old.max_rate_hz if max_rate_hz is None else max_rate_hz,
+            kinds=old.kinds if kinds is None else kinds,
+            object_ids=old.object_ids if object_ids is None else object_ids,
+        )
+        if not resend:
+            self.scene.keep_only(self.options)
+        if self._sock is not None and not self._expect_hello:
+            self._send(replace(self.options, resend=resend))
+        # Not connected, or before the Hello: the options go out after the next Hello.
+
+    def resend(self) -> None:
+        """Asks for a fresh snapshot (Session, Shapes, SnapshotDone) under the current options."""
+        self.subscribe(resend=True)
+
+    def _send(self, options: Subscribe) -> None:
+        assert self._sock is not None
+        if options.resend:
+            self._sessions_to_skip = 0 if self._awaiting is None else self._sessions_to_skip + 1
+            self._awaiting = options
+        try:
+            self._sock.sendall(encode_subscribe(options))
+        except OSError as error:
+            # The connection is going; reading it says so.
+            log.debug("sending Subscribe failed: %s", error)
+
+    # -- iteration ----------------------------------------------------------------------------
 
     def __iter__(self) -> Iterator[Message]:
         return self
@@ -94,18 +403,36 @@ class Subscriber:
             except (TimeoutError, Refused, VersionMismatch):
                 self.close()
                 raise
-            except (OSError, EOFError):
+            except (OSError, EOFError) as error:
                 # Not there yet, gone, or restarting: worth waiting for, unless told not to.
                 self.close()
                 if not self.reconnect:
                     self._finished = True
                     raise StopIteration from None
+                if self._lost is None:
+                    self._lost = str(error) or type(error).__name__
+                    log.warning(
+                        "tacmesh: the daemon at %s went away (%s); reconnecting",
+                        self.path,
+                        self._lost,
+                    )
                 time.sleep(delay)
                 delay = min(2 * delay, self.max_backoff_s)
                 continue
+            if message is None:
+                continue
+            self.scene.apply(message)
             if isinstance(message, Goodbye):
                 self.close()
-                self._finished = not self.reconnect
+                if self.reconnect:
+                    self._lost = f"Goodbye: {message.reason}"
+                    log.warning(
+                        "tacmesh: the daemon at %s said Goodbye (%s); reconnecting",
+                        self.path,
+                        message.reason,
+                    )
+                else:
+                    self._finished = True
             return message
 
     def _connect(self) -> None:
@@ -119,38 +446,84 @@ class Subscriber:
         self._sock = sock
         self._decoder = FrameDecoder()
         self._expect_hello = True
+        self._awaiting = None
+        self._sessions_to_skip = 0
         self.connections += 1
+        if self._lost is not None:
+            log.warning("tacmesh: connected to the daemon at %s again", self.path)
+            self._lost = None
 
-    def _read_message(self) -> Message:
+    def _receive(self) -> Message:
         assert self._sock is not None
         while True:
             message = self._decoder.next_message()
             if message is not None:
-                break
+                self.last_frame_bytes = self._decoder.last_frame_bytes
+                if isinstance(message, (Subscribe, SubscribeV1)):  # the decoder refuses these
+                    raise WireError(f"a client's message from the daemon: {message}")
+                return message
             data = self._sock.recv(65536)
             if not data:
                 if self._decoder.buffered:
-                    raise ProtocolError(
-                        f"the connection closed inside a frame ({self._decoder.buffered} bytes)"
+                    # The daemon drops a client that reads nothing for 30 s, possibly in the
+                    # middle of a frame: the end of the input, like any other.
+                    raise EOFError(
+                        f"the daemon closed the connection inside a frame "
+                        f"({self._decoder.buffered} bytes of it received)"
                     )
                 raise EOFError("the daemon closed the connection")
+            self.bytes_received += len(data)
             self._decoder.push(data)
+
+    def _read_message(self) -> Message | None:
+        """The next message to yield, or None for one skipped."""
+        message = self._receive()
         if self._expect_hello:
-            self._expect_hello = False
-            if isinstance(message, Goodbye):
-                self.close()
-                raise Refused(f"the daemon refused this client: {message.reason}")
-            if not isinstance(message, Hello):
-                raise ProtocolError(f"the first message is {type(message).__name__}, not Hello")
-            if message.protocol_version not in SUPPORTED_VERSIONS:
-                self.close()
-                raise VersionMismatch(
-                    f"the daemon ({message.server}) speaks protocol version "
-                    f"{message.protocol_version}; this client reads {sorted(SUPPORTED_VERSIONS)}"
-                )
-            if self.send_subscribe:
-                self._sock.sendall(encode_subscribe())
+            self._check_first(message)
+            return message
+        if self._awaiting is not None:
+            if isinstance(message, Session):
+                if self._sessions_to_skip == 0 or message.options.same_options(self._awaiting):
+                    self._awaiting = None
+                    self._sessions_to_skip = 0
+                    return message
+                self._sessions_to_skip -= 1
+            if not isinstance(message, (Stats, Goodbye)):
+                self.skipped += 1
+                return None
+        if isinstance(message, (Shape, Pose, Remove)) and not self.options.admits(
+            message.object_id
+        ):
+            # Sent before the daemon read a narrower filter.
+            self.filtered += 1
+            return None
         return message
+
+    def _check_first(self, message: Message) -> None:
+        self._expect_hello = False
+        if isinstance(message, Goodbye):
+            self.close()
+            raise Refused(f"the daemon refused this client: {message.reason}")
+        if not isinstance(message, Hello):
+            raise WireError(f"the first message is {type(message).__name__}, not Hello")
+        if message.protocol_version not in SUPPORTED_VERSIONS:
+            self.close()
+            raise VersionMismatch(
+                f"the daemon ({message.server}) speaks protocol version "
+                f"{message.protocol_version}; this client speaks version {PROTOCOL_VERSION}"
+            )
+        self.hello = message
+        if self.send_subscribe:
+            differs = not self.options.same_options(DEFAULT_OPTIONS)
+            if differs:
+                # The daemon's first snapshot (under the defaults) comes before it reads this.
+                self._awaiting = replace(self.options, resend=True)
+                self._sessions_to_skip = 1
+            assert self._sock is not None
+            try:
+                self._sock.sendall(encode_subscribe(replace(self.options, resend=differs)))
+            except OSError as error:
+                log.debug("sending Subscribe failed: %s", error)
 
     def close(self) -> None:
         if self._sock is not None:
@@ -162,53 +535,3 @@ class Subscriber:
 
     def __exit__(self, *_: object) -> None:
         self.close()
-
-
-@dataclass(frozen=True, eq=False)
-class SceneObject:
-    """The latest mesh of one object (or support plane), world frame, metres."""
-
-    object_id: int
-    version: int
-    capture_time_ns: int
-    vertices: npt.NDArray[np.float32]
-    triangles: npt.NDArray[np.uint32]
-    max_residual_m: float
-    is_plane: bool
-
-
-class Scene:
-    """What the daemon says is there now: the latest Upsert of each id, forgotten on Remove.
-
-    ``complete`` is True once the connection's snapshot has ended (SnapshotDone). A Hello
-    (a new connection) empties the scene: the new snapshot replaces it whole.
-    """
-
-    def __init__(self) -> None:
-        self.objects: dict[int, SceneObject] = {}
-        self.complete = False
-
-    def apply(self, message: Message) -> None:
-        if isinstance(message, Hello):
-            self.objects.clear()
-            self.complete = False
-        elif isinstance(message, Upsert):
-            known = self.objects.get(message.object_id)
-            if known is not None and message.version <= known.version:
-                raise ProtocolError(
-                    f"object {message.object_id}: version {message.version} after "
-                    f"{known.version}; versions never go backwards"
-                )
-            self.objects[message.object_id] = SceneObject(
-                object_id=message.object_id,
-                version=message.version,
-                capture_time_ns=message.capture_time_ns,
-                vertices=message.vertices,
-                triangles=message.triangles,
-                max_residual_m=message.max_residual_m,
-                is_plane=message.is_plane,
-            )
-        elif isinstance(message, Remove):
-            self.objects.pop(message.object_id, None)
-        elif isinstance(message, SnapshotDone):
-            self.complete = True

@@ -1,85 +1,362 @@
-"""The tacmesh wire protocol (docs/protocol.md in the repository), decoded strictly.
+"""The tacmesh wire protocol, version 2 (docs/protocol.md in the repository): every message
+decoded strictly and encoded.
 
 Every message is one frame: a little-endian ``u32`` length (the kind byte and the payload), a
 kind byte, and the payload laid out as the document says. A frame that breaks any rule of the
-document (an unknown kind or one of the other direction, a payload shorter or longer than its
-layout, a string that is not UTF-8 or over its cap, a non-finite vertex, a triangle index out of
-range, a latency or residual that is NaN, infinite or negative, a length over the cap) raises
-:class:`ProtocolError`: garbage is never skipped silently.
+document raises a :class:`WireError` subclass naming what is wrong (:class:`UnknownKind`,
+:class:`WrongDirection`, :class:`Truncated`, :class:`TrailingBytes`, :class:`InvalidText`,
+:class:`TextTooLong`, :class:`CountOverCap`, :class:`InvalidFlags`, :class:`InvalidEnum`,
+:class:`NonFinite`, :class:`NotUnitQuaternion`, :class:`TimesOutOfOrder`,
+:class:`IndexOutOfRange`, :class:`BadBox`, :class:`InvalidNumber`, :class:`FrameTooLarge`,
+:class:`EmptyFrame`): garbage is never skipped silently.
 
-Entry points: :class:`FrameDecoder` (bytes in, messages out) and :func:`encode_subscribe`.
+Entry points: :class:`FrameDecoder` (bytes in, messages out), :func:`encode` (a message to its
+frame), :func:`encode_subscribe`, and the message dataclasses. Geometry is numpy: vertices
+``float32 (V, 3)`` in the object's frame, triangles ``uint32 (T, 3)``.
 """
 
 from __future__ import annotations
 
+import enum
+import math
 import struct
 from dataclasses import dataclass, field
-from typing import Union
+from typing import Literal, Union
 
 import numpy as np
 import numpy.typing as npt
 
-#: Protocol versions this client reads.
-SUPPORTED_VERSIONS = frozenset({1})
+#: The protocol version this module speaks.
+PROTOCOL_VERSION = 2
+#: Protocol versions this client reads (a Hello of another version is refused).
+SUPPORTED_VERSIONS = frozenset({PROTOCOL_VERSION})
 
 #: The largest ``length`` a frame may carry (64 MiB).
 MAX_FRAME_BYTES = 64 * 1024 * 1024
 #: Caps on string fields, bytes of UTF-8.
 MAX_NAME_BYTES = 64
 MAX_REASON_BYTES = 1024
+#: The most object ids a Subscribe may list.
+MAX_SUBSCRIBE_IDS = 1024
+#: How far from 1 a rotation quaternion's norm may be.
+UNIT_QUATERNION_TOLERANCE = 1e-3
+#: The steps of a compact encoding's quantisation, per axis.
+COMPACT_STEPS = 65535
+#: The most vertices a compact Shape may have and still carry u16 indices.
+COMPACT_U16_VERTICES = 65536
 
 KIND_HELLO = 0x01
-KIND_UPSERT = 0x02
 KIND_REMOVE = 0x03
 KIND_SNAPSHOT_DONE = 0x04
-KIND_STATS = 0x05
 KIND_GOODBYE = 0x06
-KIND_SUBSCRIBE = 0x80
+KIND_SESSION = 0x07
+KIND_SHAPE = 0x08
+KIND_POSE = 0x09
+KIND_STATS = 0x0A
+KIND_SUBSCRIBE_V1 = 0x80
+KIND_SUBSCRIBE = 0x81
+#: Kind numbers of version 1 that version 2 retired; never valid again.
+RETIRED_KINDS = {0x02: "version 1's Upsert", 0x05: "version 1's Stats"}
 
-#: Support planes (tables, floors) have ids from here up; objects have ids below.
-FIRST_PLANE_ID = 1 << 32
+#: Support planes (tables, floors) have ids from here up; objects have ids from 1 below it.
+FIRST_SUPPORT_ID = 1 << 32
+#: The name version 1 of this package used for :data:`FIRST_SUPPORT_ID`.
+FIRST_PLANE_ID = FIRST_SUPPORT_ID
+
+#: Shape flags.
+SHAPE_CLOSED = 0x01
+SHAPE_SUPPORT = 0x02
+#: Subscribe flags.
+SUBSCRIBE_RESEND = 0x01
+
+#: Fixed sizes, bytes of payload.
+POSE_BYTES = 92
+SHAPE_HEADER_BYTES = 130
+COMPACT_BOX_BYTES = 24
+SUBSCRIBE_HEADER_BYTES = 11
+SESSION_HEADER_BYTES = 16
+STATS_HEADER_BYTES = 168
+STAGE_FIXED_BYTES = 2 + 4 + 4
 
 
-class ProtocolError(ValueError):
-    """A frame that breaks docs/protocol.md; the connection it came on cannot be trusted."""
+# ---------------------------------------------------------------------------------------------
+# Errors
+
+
+class WireError(ValueError):
+    """A frame that breaks docs/protocol.md; the connection it came on cannot be trusted.
+
+    Each rule of the document's "A receiver refuses…" list has its own subclass. The encoder
+    raises the same errors for a message a receiver would refuse.
+    """
+
+
+#: The name version 1 of this package used for :class:`WireError`.
+ProtocolError = WireError
+
+
+class FrameTooLarge(WireError):
+    """A length prefix over :data:`MAX_FRAME_BYTES`."""
+
+
+class EmptyFrame(WireError):
+    """A length prefix of 0: the frame has no kind."""
+
+
+class UnknownKind(WireError):
+    """A kind this version does not define (kind 0 and the retired ones included)."""
+
+
+class WrongDirection(WireError):
+    """A kind the other side sends: a client kind from a server, or the reverse."""
+
+
+class Truncated(WireError):
+    """A payload shorter than its layout says."""
+
+
+class TrailingBytes(WireError):
+    """A payload longer than its layout says."""
+
+
+class InvalidText(WireError):
+    """A string that is not UTF-8."""
+
+
+class TextTooLong(WireError):
+    """A string over its cap."""
+
+
+class CountOverCap(WireError):
+    """A count over its cap (a Subscribe's ids)."""
+
+
+class InvalidFlags(WireError):
+    """A flag bit this document does not define (or a ``kinds`` of no kind)."""
+
+
+class InvalidEnum(WireError):
+    """An enumeration value this document does not define (an encoding other than 0 or 1)."""
+
+
+class NonFinite(WireError):
+    """A vertex coordinate, pose, velocity or box that is NaN or infinite."""
+
+
+class NotUnitQuaternion(WireError):
+    """A rotation whose norm is more than 10⁻³ from 1."""
+
+
+class TimesOutOfOrder(WireError):
+    """A last-seen time before the pose time."""
+
+
+class IndexOutOfRange(WireError):
+    """A triangle index not below the frame's vertex count."""
+
+
+class BadBox(WireError):
+    """A compact box whose maximum is below its minimum (or one the encoder cannot hold)."""
+
+
+class InvalidNumber(WireError):
+    """A residual, rate or latency that is NaN, infinite or negative."""
+
+
+class StreamEndedInFrame(WireError):
+    """The byte stream ended inside a frame (a client dropped for not reading sees this)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages
+
+
+class Encoding(enum.IntEnum):
+    """How a Shape's vertices and triangles are laid out."""
+
+    FULL = 0
+    COMPACT = 1
+
+
+class Kinds(enum.IntFlag):
+    """Which objects a client is sent: bit 0 objects, bit 1 support planes."""
+
+    OBJECTS = 1
+    SUPPORTS = 2
+    ALL = 3
+
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
 
 
 @dataclass(frozen=True)
 class Hello:
+    """Server → client, first on every connection; its layout is the same in every version."""
+
     protocol_version: int
+    #: The daemon's name and version, at most 64 bytes of UTF-8.
     server: str
 
 
-@dataclass(frozen=True, eq=False)
-class Upsert:
-    """A new object, or a new mesh of one: vertices in metres, world frame."""
+@dataclass(frozen=True)
+class Subscribe:
+    """Client → server (0x81): what the client wants; also the options a Session reports."""
+
+    encoding: Encoding = Encoding.FULL
+    #: Send a fresh snapshot (Session, Shapes, SnapshotDone) under the new options.
+    resend: bool = False
+    #: At most this many updates a second per object; 0 for no cap.
+    max_rate_hz: float = 0.0
+    kinds: Kinds = Kinds.ALL
+    #: Only these objects (of the kinds asked for); empty for all. At most 1,024.
+    object_ids: tuple[int, ...] = ()
+
+    def admits(self, object_id: int) -> bool:
+        """Whether an object of this id passes the filter (its kind, and the ids if any)."""
+        kind = Kinds.SUPPORTS if object_id >= FIRST_SUPPORT_ID else Kinds.OBJECTS
+        if not self.kinds & kind:
+            return False
+        return not self.object_ids or object_id in self.object_ids
+
+    def same_options(self, other: Subscribe) -> bool:
+        """Whether the two ask for the same stream: everything but ``resend`` equal (the ids as
+        a set, the rate as the f32 on the wire)."""
+        return (
+            self.encoding == other.encoding
+            and _f32(self.max_rate_hz) == _f32(other.max_rate_hz)
+            and self.kinds == other.kinds
+            and set(self.object_ids) == set(other.object_ids)
+        )
+
+
+#: The options a server follows until a client sends a Subscribe.
+DEFAULT_OPTIONS = Subscribe()
+
+
+@dataclass(frozen=True)
+class SubscribeV1:
+    """Client → server (0x80): version 1's empty Subscribe. A version-2 server refuses it with
+    a Goodbye; this client never sends it (the encoder is here for tests)."""
+
+
+@dataclass(frozen=True)
+class Session:
+    """Server → client: a snapshot begins; the server's clocks now and the options in effect."""
+
+    #: The server's CLOCK_MONOTONIC when the message was written, ns.
+    monotonic_ns: int
+    #: Its CLOCK_REALTIME (ns since the Unix epoch) at the same moment.
+    realtime_ns: int
+    options: Subscribe = DEFAULT_OPTIONS
+
+    @property
+    def realtime_offset_ns(self) -> int:
+        """Add to a monotonic time of the stream for its wall-clock time."""
+        return self.realtime_ns - self.monotonic_ns
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Server → client (0x09), and the start of every Shape: where an object is.
+
+    ``rotation`` (x, y, z, w) and ``translation`` (metres) are ``world_from_object``.
+    """
 
     object_id: int
-    version: int
-    #: Capture time of the newest depth frame in this mesh, ns on the host's CLOCK_MONOTONIC.
-    capture_time_ns: int
+    #: The version of the shape this pose places.
+    shape_version: int
+    #: Capture time of the frame the pose was estimated from, CLOCK_MONOTONIC ns.
+    pose_time_ns: int
+    #: The same instant on CLOCK_REALTIME.
+    pose_time_realtime_ns: int
+    #: Capture time of the newest frame that saw the object at this pose, CLOCK_MONOTONIC ns.
+    last_seen_ns: int
+    rotation: Quat = (0.0, 0.0, 0.0, 1.0)
+    translation: Vec3 = (0.0, 0.0, 0.0)
+    #: Of the object frame's origin, world frame, m/s.
+    linear_velocity: Vec3 = (0.0, 0.0, 0.0)
+    #: World frame, rad/s (rotation axis × rate).
+    angular_velocity: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def is_support(self) -> bool:
+        return self.object_id >= FIRST_SUPPORT_ID
+
+    def rotation_matrix(self) -> npt.NDArray[np.float64]:
+        """The rotation as a 3 × 3 matrix (of the quaternion normalised)."""
+        return quaternion_matrix(self.rotation)
+
+    def world_from_object(self) -> npt.NDArray[np.float64]:
+        """The pose as a 4 × 4 homogeneous matrix."""
+        matrix = np.eye(4)
+        matrix[:3, :3] = self.rotation_matrix()
+        matrix[:3, 3] = self.translation
+        return matrix
+
+    def to_world(self, points: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """Points ``(N, 3)`` of the object frame in the world frame, float32."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        world = p @ self.rotation_matrix().T + np.asarray(self.translation, dtype=np.float64)
+        return world.astype(np.float32)
+
+
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """Server → client (0x08): a new object or a new shape of one, with the pose placing it.
+
+    ``vertices`` (``float32 (V, 3)``, metres) are in the object's frame: :meth:`world_vertices`
+    places them. A compact Shape is decoded (dequantised) to the same arrays;
+    ``max_residual_m`` then includes the quantisation bound.
+    """
+
+    pose: Pose
+    #: Capture time of the newest frame fused into the shape, CLOCK_MONOTONIC ns.
+    shape_time_ns: int
+    shape_time_realtime_ns: int
+    #: :data:`SHAPE_CLOSED`, :data:`SHAPE_SUPPORT`.
+    flags: int
     faces_in: int
     faces_out: int
     max_residual_m: float
-    #: ``float32 (V, 3)``.
+    #: ``float32 (V, 3)``, object frame.
     vertices: npt.NDArray[np.float32]
     #: ``uint32 (T, 3)``, each index below V.
     triangles: npt.NDArray[np.uint32]
+    encoding: Encoding = Encoding.FULL
 
     @property
-    def is_plane(self) -> bool:
-        """Whether this is a support plane (a table or floor), not an object."""
-        return self.object_id >= FIRST_PLANE_ID
+    def object_id(self) -> int:
+        return self.pose.object_id
+
+    @property
+    def shape_version(self) -> int:
+        return self.pose.shape_version
+
+    @property
+    def is_closed(self) -> bool:
+        return bool(self.flags & SHAPE_CLOSED)
+
+    @property
+    def is_support(self) -> bool:
+        """A support plane (a table or floor), by its flag."""
+        return bool(self.flags & SHAPE_SUPPORT)
+
+    def world_vertices(self) -> npt.NDArray[np.float32]:
+        """The vertices mapped into the world by the shape's own pose."""
+        return self.pose.to_world(self.vertices)
 
 
 @dataclass(frozen=True)
 class Remove:
+    """Server → client: the object is gone; forget it."""
+
     object_id: int
 
 
 @dataclass(frozen=True)
 class SnapshotDone:
-    pass
+    """Server → client: every object of the snapshot has been sent."""
 
 
 @dataclass(frozen=True)
@@ -91,29 +368,154 @@ class StageLatency:
 
 @dataclass(frozen=True)
 class Stats:
-    frames_in: int
-    frames_dropped: int
-    invalid_pixels: int
-    objects_tracked: int
-    meshing_runs: int
-    meshes_published: int
-    bytes_sent: int
-    frame_to_publish_p50_ms: float
-    frame_to_publish_p99_ms: float
-    stages: list[StageLatency] = field(default_factory=list)
+    """Server → client, about once a second: counters since the daemon's start, latencies."""
+
+    monotonic_ns: int = 0
+    realtime_ns: int = 0
+    frames_in: int = 0
+    frames_dropped: int = 0
+    invalid_pixels: int = 0
+    malformed_frames: int = 0
+    source_errors: int = 0
+    source_restarts: int = 0
+    objects_tracked: int = 0
+    objects_born: int = 0
+    objects_removed: int = 0
+    meshing_runs: int = 0
+    meshing_failures: int = 0
+    shapes_published: int = 0
+    poses_published: int = 0
+    bytes_sent: int = 0
+    clients_connected: int = 0
+    clients_dropped: int = 0
+    clients_refused: int = 0
+    latency_window: int = 0
+    frame_to_publish_p50_ms: float = 0.0
+    frame_to_publish_p99_ms: float = 0.0
+    stages: tuple[StageLatency, ...] = field(default_factory=tuple)
+
+    @property
+    def realtime_offset_ns(self) -> int:
+        """Add to a monotonic time of the stream for its wall-clock time."""
+        return self.realtime_ns - self.monotonic_ns
 
 
 @dataclass(frozen=True)
 class Goodbye:
+    """Server → client: shutting down, or this client is refused; the connection closes."""
+
     reason: str
 
 
-Message = Union[Hello, Upsert, Remove, SnapshotDone, Stats, Goodbye]
+#: What a server sends.
+Message = Union[Hello, Session, Shape, Pose, Remove, SnapshotDone, Stats, Goodbye]
+#: What a client sends.
+ClientMessage = Union[Subscribe, SubscribeV1]
+AnyMessage = Union[Message, ClientMessage]
+
+Sender = Literal["server", "client"]
+
+_NAMES = {
+    KIND_HELLO: "Hello",
+    KIND_REMOVE: "Remove",
+    KIND_SNAPSHOT_DONE: "SnapshotDone",
+    KIND_GOODBYE: "Goodbye",
+    KIND_SESSION: "Session",
+    KIND_SHAPE: "Shape",
+    KIND_POSE: "Pose",
+    KIND_STATS: "Stats",
+    KIND_SUBSCRIBE_V1: "Subscribe (version 1)",
+    KIND_SUBSCRIBE: "Subscribe",
+}
 
 
-def encode_subscribe() -> bytes:
-    """The Subscribe frame (version 1: no payload)."""
-    return struct.pack("<IB", 1, KIND_SUBSCRIBE)
+# ---------------------------------------------------------------------------------------------
+# Geometry helpers
+
+
+def quaternion_matrix(q: Quat) -> npt.NDArray[np.float64]:
+    """The rotation matrix of the unit quaternion ``(x, y, z, w)`` (normalised first)."""
+    x, y, z, w = (float(c) for c in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n == 0.0:
+        raise ValueError("a zero quaternion is no rotation")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _length_f32(v: npt.NDArray[np.float32]) -> np.float32:
+    x, y, z = (np.float32(c) for c in v)
+    return np.float32(np.sqrt(x * x + y * y + z * z, dtype=np.float32))
+
+
+def quantisation_bound_m(box_min: npt.ArrayLike, box_max: npt.ArrayLike) -> float:
+    """The farthest a vertex a receiver decodes is from the vertex the encoder had, in the
+    compact encoding of a box: half a step per axis, ``½ · |box_max − box_min| / 65535``, plus
+    the receiver's f32 rounding, ``2⁻²⁴ · (3 · |box_max − box_min| + |c|)`` (c per axis the
+    larger magnitude of ``box_min`` and ``box_max``). Computed in f32, in the order the
+    reference implementation does, so that both write the same residual."""
+    lo = np.asarray(box_min, np.float32)
+    hi = np.asarray(box_max, np.float32)
+    extent = np.maximum(hi - lo, np.float32(0)).astype(np.float32)
+    length = _length_f32(extent)
+    corner = _length_f32(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32))
+    half_step = np.float32(np.float32(0.5) * length) / np.float32(COMPACT_STEPS)
+    rounding = np.float32(2.0**-24) * np.float32(np.float32(3) * length + corner)
+    return float(np.float32(half_step + rounding))
+
+
+def dequantise(
+    box_min: npt.NDArray[np.float32],
+    box_max: npt.NDArray[np.float32],
+    q: npt.NDArray[np.uint16],
+) -> npt.NDArray[np.float32]:
+    """Compact vertices: ``box_min + q · ((box_max − box_min) / 65535)`` per axis, in float32."""
+    step = (box_max.astype(np.float32) - box_min.astype(np.float32)) / np.float32(COMPACT_STEPS)
+    out = box_min.astype(np.float32) + q.astype(np.float32) * step.astype(np.float32)
+    return out.astype(np.float32).reshape(-1, 3)
+
+
+def quantise(
+    vertices: npt.NDArray[np.float32],
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.uint16]]:
+    """The compact encoding's box (the vertices' smallest and largest x, y, z; zeros for an
+    empty shape) and each coordinate rounded to the nearest of its 65,536 steps (0 on an axis
+    where the box is flat)."""
+    v = np.asarray(vertices, dtype=np.float32).reshape(-1, 3)
+    if len(v) == 0:
+        zeros = np.zeros(3, np.float32)
+        return zeros, zeros.copy(), np.zeros((0, 3), np.uint16)
+    box_min = v.min(axis=0)
+    box_max = v.max(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        top = dequantise(box_min, box_max, np.full((1, 3), COMPACT_STEPS, np.uint16))
+        if not (np.all(np.isfinite(box_max - box_min)) and np.all(np.isfinite(top))):
+            raise BadBox(
+                f"the shape's vertices span {box_min.tolist()} to {box_max.tolist()}, more "
+                "than the compact encoding's box can hold in f32: send it in the full encoding"
+            )
+    lo = box_min.astype(np.float64)
+    extent = box_max.astype(np.float64) - lo
+    flat = extent <= 0
+    t = (v.astype(np.float64) - lo) / np.where(flat, 1.0, extent)
+    # Halves round up (away from zero), as the reference implementation rounds them.
+    q = np.clip(np.floor(t * COMPACT_STEPS + 0.5), 0, COMPACT_STEPS)
+    return box_min, box_max, np.where(flat, 0.0, q).astype(np.uint16)
+
+
+def _f32(value: float) -> float:
+    result: float = struct.unpack("<f", struct.pack("<f", value))[0]
+    return result
+
+
+# ---------------------------------------------------------------------------------------------
+# Decoding
 
 
 class _Reader:
@@ -122,17 +524,24 @@ class _Reader:
     def __init__(self, payload: bytes, what: str) -> None:
         self._payload = payload
         self._at = 0
-        self._what = what
+        self.what = what
+
+    @property
+    def left(self) -> int:
+        return len(self._payload) - self._at
 
     def take(self, n: int, field_name: str) -> bytes:
-        if self._at + n > len(self._payload):
-            raise ProtocolError(
-                f"{self._what}: the payload ends inside {field_name} "
-                f"({len(self._payload)} bytes)"
+        if n > self.left:
+            raise Truncated(
+                f"{self.what} frame ends inside `{field_name}`: it needs {n} bytes, "
+                f"{self.left} are left"
             )
         chunk = self._payload[self._at : self._at + n]
         self._at += n
         return chunk
+
+    def u8(self, name: str) -> int:
+        return self.take(1, name)[0]
 
     def u16(self, name: str) -> int:
         value: int = struct.unpack("<H", self.take(2, name))[0]
@@ -146,131 +555,328 @@ class _Reader:
         value: int = struct.unpack("<Q", self.take(8, name))[0]
         return value
 
-    def latency(self, name: str) -> float:
+    def f32(self, name: str) -> float:
         value: float = struct.unpack("<f", self.take(4, name))[0]
-        if not np.isfinite(value) or value < 0.0:
-            raise ProtocolError(f"{self._what}: {name} is {value}, not a finite value >= 0")
+        return value
+
+    def vec3(self, name: str) -> Vec3:
+        x, y, z = struct.unpack("<3f", self.take(12, name))
+        return (x, y, z)
+
+    def quat(self, name: str) -> Quat:
+        x, y, z, w = struct.unpack("<4f", self.take(16, name))
+        return (x, y, z, w)
+
+    def number(self, name: str) -> float:
+        """A residual, rate or latency: finite and ≥ 0."""
+        value = self.f32(name)
+        _check_number(self.what, name, value)
         return value
 
     def text(self, name: str, cap: int) -> str:
         n = self.u16(name)
         if n > cap:
-            raise ProtocolError(f"{self._what}: {name} is {n} bytes, over its cap of {cap}")
+            raise TextTooLong(f"`{name}` of {self.what} is {n} bytes, more than the cap of {cap}")
         raw = self.take(n, name)
         try:
             return raw.decode("utf-8")
         except UnicodeDecodeError as error:
-            raise ProtocolError(f"{self._what}: {name} is not UTF-8 ({error})") from None
+            raise InvalidText(
+                f"`{name}` of {self.what} is not UTF-8 (valid up to byte {error.start})"
+            ) from None
 
     def end(self) -> None:
-        left = len(self._payload) - self._at
-        if left:
-            raise ProtocolError(f"{self._what}: {left} bytes after the last field")
+        if self.left:
+            raise TrailingBytes(f"{self.what} frame has {self.left} bytes after its last field")
 
 
-def decode_payload(kind: int, payload: bytes) -> Message:
-    """One message from its kind and payload (the frame without its length and kind)."""
-    if kind == KIND_HELLO:
-        r = _Reader(payload, "Hello")
-        hello = Hello(r.u16("protocol_version"), r.text("server", MAX_NAME_BYTES))
-        r.end()
-        return hello
-    if kind == KIND_UPSERT:
-        return _upsert(payload)
-    if kind == KIND_REMOVE:
-        r = _Reader(payload, "Remove")
-        remove = Remove(r.u64("object_id"))
-        r.end()
-        return remove
-    if kind == KIND_SNAPSHOT_DONE:
-        _Reader(payload, "SnapshotDone").end()
-        return SnapshotDone()
-    if kind == KIND_STATS:
-        return _stats(payload)
-    if kind == KIND_GOODBYE:
-        r = _Reader(payload, "Goodbye")
-        goodbye = Goodbye(r.text("reason", MAX_REASON_BYTES))
-        r.end()
-        return goodbye
-    if kind >= 0x80:
-        raise ProtocolError(f"kind 0x{kind:02x} is a client's; a server never sends it")
-    raise ProtocolError(f"unknown kind 0x{kind:02x}")
+def _check_number(what: str, name: str, value: float) -> None:
+    if not math.isfinite(value) or value < 0.0:
+        raise InvalidNumber(
+            f"`{name}` of {what} is {value}, but it must be finite and not negative"
+        )
 
 
-def _upsert(payload: bytes) -> Upsert:
-    r = _Reader(payload, "Upsert")
-    object_id = r.u64("object_id")
-    version = r.u64("version")
-    capture_time_ns = r.u64("capture_time_ns")
+def _check_finite(what: str, name: str, values: tuple[float, ...]) -> None:
+    for value in values:
+        if not math.isfinite(value):
+            raise NonFinite(
+                f"`{name}` of {what} has a non-finite component ({value}): it must be finite"
+            )
+
+
+def _check_pose(what: str, pose: Pose) -> None:
+    _check_finite(what, "rotation", pose.rotation)
+    _check_finite(what, "translation", pose.translation)
+    _check_finite(what, "linear_velocity", pose.linear_velocity)
+    _check_finite(what, "angular_velocity", pose.angular_velocity)
+    norm = math.sqrt(sum(c * c for c in pose.rotation))
+    if abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
+        raise NotUnitQuaternion(
+            f"the rotation of object {pose.object_id} has norm {norm:.6g}: it must be a unit "
+            f"quaternion (norm within {UNIT_QUATERNION_TOLERANCE:g} of 1)"
+        )
+    if pose.last_seen_ns < pose.pose_time_ns:
+        raise TimesOutOfOrder(
+            f"object {pose.object_id} was last seen at {pose.last_seen_ns} ns, before its pose "
+            f"time {pose.pose_time_ns} ns: last seen is never earlier than the pose time"
+        )
+
+
+def _read_pose(r: _Reader) -> Pose:
+    pose = Pose(
+        object_id=r.u64("object_id"),
+        shape_version=r.u64("shape_version"),
+        pose_time_ns=r.u64("pose_time_ns"),
+        pose_time_realtime_ns=r.u64("pose_time_realtime_ns"),
+        last_seen_ns=r.u64("last_seen_ns"),
+        rotation=r.quat("rotation"),
+        translation=r.vec3("translation"),
+        linear_velocity=r.vec3("linear_velocity"),
+        angular_velocity=r.vec3("angular_velocity"),
+    )
+    _check_pose(r.what, pose)
+    return pose
+
+
+def _read_options(r: _Reader) -> Subscribe:
+    encoding = r.u8("encoding")
+    if encoding not in (0, 1):
+        raise InvalidEnum(
+            f"`encoding` of {r.what} is {encoding}, which is not a defined value "
+            "(0 full, 1 compact)"
+        )
+    flags = r.u8("flags")
+    if flags & ~SUBSCRIBE_RESEND:
+        raise InvalidFlags(
+            f"`flags` of {r.what} is 0x{flags:02x}, but only the bits "
+            f"0x{SUBSCRIBE_RESEND:02x} are defined"
+        )
+    max_rate_hz = r.number("max_rate_hz")
+    kinds = r.u8("kinds")
+    if kinds == 0:
+        raise InvalidFlags(
+            f"`kinds` of {r.what} is 0: it must ask for objects (bit 0), support planes "
+            "(bit 1) or both"
+        )
+    if kinds & ~int(Kinds.ALL):
+        raise InvalidFlags(
+            f"`kinds` of {r.what} is 0x{kinds:02x}, but only the bits 0x03 are defined"
+        )
+    n = r.u32("id_count")
+    if n > MAX_SUBSCRIBE_IDS:
+        raise CountOverCap(
+            f"{r.what} lists {n} object ids, more than the cap of {MAX_SUBSCRIBE_IDS}"
+        )
+    ids = struct.unpack(f"<{n}Q", r.take(8 * n, "object_ids"))
+    return Subscribe(
+        encoding=Encoding(encoding),
+        resend=bool(flags & SUBSCRIBE_RESEND),
+        max_rate_hz=max_rate_hz,
+        kinds=Kinds(kinds),
+        object_ids=tuple(ids),
+    )
+
+
+def _read_shape(r: _Reader) -> Shape:
+    pose = _read_pose(r)
+    shape_time_ns = r.u64("shape_time_ns")
+    shape_time_realtime_ns = r.u64("shape_time_realtime_ns")
+    flags = r.u8("flags")
+    if flags & ~(SHAPE_CLOSED | SHAPE_SUPPORT):
+        raise InvalidFlags(
+            f"`flags` of the Shape of object {pose.object_id} is 0x{flags:02x}, but only the "
+            f"bits 0x{SHAPE_CLOSED | SHAPE_SUPPORT:02x} are defined"
+        )
     faces_in = r.u32("faces_in")
     faces_out = r.u32("faces_out")
-    max_residual_m = r.latency("max_residual_m")
+    max_residual_m = r.number("max_residual_m")
+    encoding_byte = r.u8("encoding")
+    if encoding_byte not in (0, 1):
+        raise InvalidEnum(
+            f"`encoding` of the Shape of object {pose.object_id} is {encoding_byte}, which is "
+            "not a defined value (0 full, 1 compact)"
+        )
+    encoding = Encoding(encoding_byte)
     v = r.u32("vertex_count")
     t = r.u32("triangle_count")
-    # Checked before reading so a huge count cannot make a huge array.
-    expected = 44 + 12 * v + 12 * t
-    if expected != len(payload):
-        raise ProtocolError(
-            f"Upsert of object {object_id}: {v} vertices and {t} triangles take "
-            f"{expected} bytes, the payload has {len(payload)}"
+    # The counts are checked against the payload before any array they size is made.
+    if encoding is Encoding.FULL:
+        geometry = 12 * v + 12 * t
+    else:
+        geometry = COMPACT_BOX_BYTES + 6 * v + (6 if v <= COMPACT_U16_VERTICES else 12) * t
+    if geometry > r.left:
+        raise Truncated(
+            f"Shape of object {pose.object_id}: {v} vertices and {t} triangles "
+            f"({encoding.name.lower()}) take {SHAPE_HEADER_BYTES + geometry} bytes of payload, "
+            f"it has {SHAPE_HEADER_BYTES + r.left}"
         )
-    vertices = np.frombuffer(r.take(12 * v, "vertices"), dtype="<f4").reshape(v, 3)
-    triangles = np.frombuffer(r.take(12 * t, "triangles"), dtype="<u4").reshape(t, 3)
+    if geometry < r.left:
+        raise TrailingBytes(
+            f"Shape of object {pose.object_id}: {v} vertices and {t} triangles "
+            f"({encoding.name.lower()}) take {SHAPE_HEADER_BYTES + geometry} bytes of payload, "
+            f"it has {SHAPE_HEADER_BYTES + r.left}"
+        )
+    what = f"the Shape of object {pose.object_id}"
+    if encoding is Encoding.FULL:
+        vertices = np.frombuffer(r.take(12 * v, "vertices"), dtype="<f4").reshape(v, 3)
+        triangles = np.frombuffer(r.take(12 * t, "triangles"), dtype="<u4").reshape(t, 3)
+        bad = ~np.isfinite(vertices)
+        if bad.any():
+            index = int(np.argwhere(bad)[0][0])
+            raise NonFinite(
+                f"vertex {index} of {what} has a non-finite coordinate "
+                f"({vertices[index].tolist()}): coordinates are finite metres"
+            )
+    else:
+        box_min = np.frombuffer(r.take(12, "box_min"), dtype="<f4")
+        box_max = np.frombuffer(r.take(12, "box_max"), dtype="<f4")
+        _check_finite(what, "box_min", tuple(box_min.tolist()))
+        _check_finite(what, "box_max", tuple(box_max.tolist()))
+        for axis, lo, hi in zip("xyz", box_min.tolist(), box_max.tolist()):
+            if hi < lo:
+                raise BadBox(
+                    f"the compact box of {what} has its {axis} maximum {hi} below its "
+                    f"minimum {lo}"
+                )
+        q = np.frombuffer(r.take(6 * v, "vertices"), dtype="<u2").reshape(v, 3)
+        vertices = dequantise(box_min, box_max, q)
+        if not np.all(np.isfinite(vertices)):
+            raise NonFinite(f"the compact box of {what} spans more than f32 holds")
+        index_type = "<u2" if v <= COMPACT_U16_VERTICES else "<u4"
+        width = 2 if v <= COMPACT_U16_VERTICES else 4
+        triangles = np.frombuffer(r.take(3 * width * t, "triangles"), dtype=index_type)
+        triangles = triangles.reshape(t, 3)
     r.end()
-    if not np.all(np.isfinite(vertices)):
-        raise ProtocolError(f"Upsert of object {object_id}: a vertex is NaN or infinite")
     if t and int(triangles.max()) >= v:
-        raise ProtocolError(
-            f"Upsert of object {object_id}: triangle index {int(triangles.max())} "
-            f"is not below the vertex count {v}"
+        row = int(np.argwhere(triangles >= v)[0][0])
+        raise IndexOutOfRange(
+            f"triangle {row} of {what} uses vertex {int(triangles[row].max())}, but the mesh "
+            f"has only {v} vertices"
         )
-    return Upsert(
-        object_id=object_id,
-        version=version,
-        capture_time_ns=capture_time_ns,
+    return Shape(
+        pose=pose,
+        shape_time_ns=shape_time_ns,
+        shape_time_realtime_ns=shape_time_realtime_ns,
+        flags=flags,
         faces_in=faces_in,
         faces_out=faces_out,
         max_residual_m=max_residual_m,
         vertices=vertices.astype(np.float32),
         triangles=triangles.astype(np.uint32),
+        encoding=encoding,
     )
 
 
-def _stats(payload: bytes) -> Stats:
-    r = _Reader(payload, "Stats")
-    frames_in = r.u64("frames_in")
-    frames_dropped = r.u64("frames_dropped")
-    invalid_pixels = r.u64("invalid_pixels")
-    objects_tracked = r.u64("objects_tracked")
-    meshing_runs = r.u64("meshing_runs")
-    meshes_published = r.u64("meshes_published")
-    bytes_sent = r.u64("bytes_sent")
-    p50 = r.latency("frame_to_publish_p50_ms")
-    p99 = r.latency("frame_to_publish_p99_ms")
-    stages = [
-        StageLatency(r.text("stage", MAX_NAME_BYTES), r.latency("p50_ms"), r.latency("p99_ms"))
-        for _ in range(r.u32("stage_count"))
-    ]
-    r.end()
+_STATS_COUNTERS = (
+    "monotonic_ns",
+    "realtime_ns",
+    "frames_in",
+    "frames_dropped",
+    "invalid_pixels",
+    "malformed_frames",
+    "source_errors",
+    "source_restarts",
+    "objects_tracked",
+    "objects_born",
+    "objects_removed",
+    "meshing_runs",
+    "meshing_failures",
+    "shapes_published",
+    "poses_published",
+    "bytes_sent",
+    "clients_connected",
+    "clients_dropped",
+    "clients_refused",
+)
+
+
+def _read_stats(r: _Reader) -> Stats:
+    counters = {name: r.u64(name) for name in _STATS_COUNTERS}
+    latency_window = r.u32("latency_window")
+    p50 = r.number("frame_to_publish_p50_ms")
+    p99 = r.number("frame_to_publish_p99_ms")
+    n = r.u32("stage_count")
+    if n * STAGE_FIXED_BYTES > r.left:
+        raise Truncated(
+            f"Stats frame ends inside `stages`: {n} stages need at least "
+            f"{n * STAGE_FIXED_BYTES} bytes, {r.left} are left"
+        )
+    stages = tuple(
+        StageLatency(r.text("stage", MAX_NAME_BYTES), r.number("p50_ms"), r.number("p99_ms"))
+        for _ in range(n)
+    )
     return Stats(
-        frames_in=frames_in,
-        frames_dropped=frames_dropped,
-        invalid_pixels=invalid_pixels,
-        objects_tracked=objects_tracked,
-        meshing_runs=meshing_runs,
-        meshes_published=meshes_published,
-        bytes_sent=bytes_sent,
+        **counters,
+        latency_window=latency_window,
         frame_to_publish_p50_ms=p50,
         frame_to_publish_p99_ms=p99,
         stages=stages,
     )
 
 
-class FrameDecoder:
-    """Bytes from the socket in (:meth:`push`), whole messages out (:meth:`next_message`)."""
+def decode_payload(kind: int, payload: bytes, sender: Sender = "server") -> AnyMessage:
+    """One message from its kind and payload (the frame without its length and kind), as sent
+    by ``sender`` (a client decodes what the server sends, the default)."""
+    name = _NAMES.get(kind)
+    if name is None:
+        if kind in RETIRED_KINDS:
+            raise UnknownKind(
+                f"kind 0x{kind:02x} is retired ({RETIRED_KINDS[kind]}): the peer speaks "
+                "protocol version 1"
+            )
+        raise UnknownKind(
+            f"unknown message kind 0x{kind:02x}: the peer speaks another protocol version or "
+            "is not a tacmesh peer"
+        )
+    from_client = kind >= 0x80
+    if from_client != (sender == "client"):
+        other = "client" if from_client else "server"
+        raise WrongDirection(
+            f"{name} (kind 0x{kind:02x}) is sent by a {other}, but this decoder reads what a "
+            f"{sender} sends"
+        )
+    r = _Reader(payload, name)
+    message: AnyMessage
+    if kind == KIND_HELLO:
+        message = Hello(r.u16("protocol_version"), r.text("server", MAX_NAME_BYTES))
+    elif kind == KIND_SESSION:
+        message = Session(r.u64("monotonic_ns"), r.u64("realtime_ns"), _read_options(r))
+    elif kind == KIND_SHAPE:
+        message = _read_shape(r)
+    elif kind == KIND_POSE:
+        message = _read_pose(r)
+    elif kind == KIND_REMOVE:
+        message = Remove(r.u64("object_id"))
+    elif kind == KIND_SNAPSHOT_DONE:
+        message = SnapshotDone()
+    elif kind == KIND_STATS:
+        message = _read_stats(r)
+    elif kind == KIND_GOODBYE:
+        message = Goodbye(r.text("reason", MAX_REASON_BYTES))
+    elif kind == KIND_SUBSCRIBE:
+        message = _read_options(r)
+    else:
+        assert kind == KIND_SUBSCRIBE_V1
+        message = SubscribeV1()
+    r.end()
+    return message
 
-    def __init__(self) -> None:
+
+class FrameDecoder:
+    """Bytes from the socket in (:meth:`push`), whole messages out (:meth:`next_message`).
+
+    ``sender`` is whose messages these are: ``"server"`` (the default, for a client) or
+    ``"client"`` (for a server, or a test playing one). A length prefix over the cap is refused
+    as soon as its four bytes are there, before any of the body is buffered. After an error,
+    drop the connection.
+    """
+
+    def __init__(self, sender: Sender = "server") -> None:
+        self.sender: Sender = sender
         self._buffer = bytearray()
+        #: Bytes of the last frame taken out, its length prefix included.
+        self.last_frame_bytes = 0
 
     def push(self, data: bytes) -> None:
         self._buffer += data
@@ -280,18 +886,213 @@ class FrameDecoder:
         """Bytes received and not yet taken out as a message."""
         return len(self._buffer)
 
-    def next_message(self) -> Message | None:
+    def _length(self) -> int:
+        (length,) = struct.unpack_from("<I", self._buffer)
+        if length == 0:
+            raise EmptyFrame("frame length 0: every frame holds at least its message kind byte")
+        if length > MAX_FRAME_BYTES:
+            raise FrameTooLarge(
+                f"frame length {length} exceeds the cap of {MAX_FRAME_BYTES} bytes: the peer "
+                "is not speaking the tacmesh protocol"
+            )
+        return int(length)
+
+    def next_message(self) -> AnyMessage | None:
         """The next whole message, or None until more bytes arrive."""
         if len(self._buffer) < 4:
             return None
-        (length,) = struct.unpack_from("<I", self._buffer)
-        if length == 0:
-            raise ProtocolError("a frame of length 0 (it has no kind)")
-        if length > MAX_FRAME_BYTES:
-            raise ProtocolError(f"a frame of {length} bytes, over the cap of {MAX_FRAME_BYTES}")
+        length = self._length()
         if len(self._buffer) < 4 + length:
             return None
         kind = self._buffer[4]
         payload = bytes(self._buffer[5 : 4 + length])
         del self._buffer[: 4 + length]
-        return decode_payload(kind, payload)
+        self.last_frame_bytes = 4 + length
+        return decode_payload(kind, payload, self.sender)
+
+
+def decode_all(data: bytes, sender: Sender = "server") -> list[AnyMessage]:
+    """Every message in ``data``, which must end at a frame boundary."""
+    decoder = FrameDecoder(sender)
+    decoder.push(data)
+    out: list[AnyMessage] = []
+    while (message := decoder.next_message()) is not None:
+        out.append(message)
+    if decoder.buffered:
+        raise StreamEndedInFrame(f"the data ends inside a frame ({decoder.buffered} bytes)")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Encoding
+
+
+def _text(value: str, what: str, name: str, cap: int, validate: bool) -> bytes:
+    raw = value.encode("utf-8")
+    if len(raw) > cap and validate:
+        raise TextTooLong(f"`{name}` of {what} is {len(raw)} bytes, more than the cap of {cap}")
+    return struct.pack("<H", len(raw)) + raw
+
+
+def _options_payload(options: Subscribe, what: str, validate: bool) -> bytes:
+    if validate:
+        _check_number(what, "max_rate_hz", options.max_rate_hz)
+        if len(options.object_ids) > MAX_SUBSCRIBE_IDS:
+            raise CountOverCap(
+                f"{what} lists {len(options.object_ids)} object ids, more than the cap of "
+                f"{MAX_SUBSCRIBE_IDS}"
+            )
+        if int(options.kinds) == 0 or int(options.kinds) & ~int(Kinds.ALL):
+            raise InvalidFlags(f"`kinds` of {what} is {int(options.kinds)}: it must be 1, 2 or 3")
+        if int(options.encoding) not in (0, 1):
+            raise InvalidEnum(f"`encoding` of {what} is {int(options.encoding)}")
+    return struct.pack(
+        f"<BBfBI{len(options.object_ids)}Q",
+        int(options.encoding),
+        SUBSCRIBE_RESEND if options.resend else 0,
+        options.max_rate_hz,
+        int(options.kinds),
+        len(options.object_ids),
+        *options.object_ids,
+    )
+
+
+def _pose_payload(pose: Pose, validate: bool) -> bytes:
+    if validate:
+        _check_pose("Pose", pose)
+    return struct.pack(
+        "<5Q4f3f3f3f",
+        pose.object_id,
+        pose.shape_version,
+        pose.pose_time_ns,
+        pose.pose_time_realtime_ns,
+        pose.last_seen_ns,
+        *pose.rotation,
+        *pose.translation,
+        *pose.linear_velocity,
+        *pose.angular_velocity,
+    )
+
+
+def _shape_payload(shape: Shape, validate: bool) -> bytes:
+    what = f"the Shape of object {shape.object_id}"
+    vertices = np.ascontiguousarray(shape.vertices, dtype="<f4").reshape(-1, 3)
+    triangles = np.ascontiguousarray(shape.triangles).reshape(-1, 3)
+    v, t = len(vertices), len(triangles)
+    if validate:
+        _check_number(what, "max_residual_m", shape.max_residual_m)
+        if shape.flags & ~(SHAPE_CLOSED | SHAPE_SUPPORT):
+            raise InvalidFlags(f"`flags` of {what} is 0x{shape.flags:02x}")
+        if not np.all(np.isfinite(vertices)):
+            raise NonFinite(f"a vertex of {what} is NaN or infinite")
+        if t and (int(triangles.max()) >= v or int(triangles.min()) < 0):
+            raise IndexOutOfRange(
+                f"a triangle of {what} uses vertex {int(triangles.max())}, but the mesh has "
+                f"only {v} vertices"
+            )
+    residual = shape.max_residual_m
+    if shape.encoding == Encoding.COMPACT:
+        box_min, box_max, q = quantise(vertices)
+        residual = float(np.float32(residual) + np.float32(quantisation_bound_m(box_min, box_max)))
+        if validate:
+            _check_number(what, "max_residual_m", residual)
+        width = "<u2" if v <= COMPACT_U16_VERTICES else "<u4"
+        geometry = (
+            box_min.astype("<f4").tobytes()
+            + box_max.astype("<f4").tobytes()
+            + q.astype("<u2").tobytes()
+            + triangles.astype(width).tobytes()
+        )
+    else:
+        geometry = vertices.tobytes() + triangles.astype("<u4").tobytes()
+    head = _pose_payload(shape.pose, validate) + struct.pack(
+        "<QQBIIfBII",
+        shape.shape_time_ns,
+        shape.shape_time_realtime_ns,
+        shape.flags,
+        shape.faces_in,
+        shape.faces_out,
+        residual,
+        int(shape.encoding),
+        v,
+        t,
+    )
+    return head + geometry
+
+
+def _stats_payload(stats: Stats, validate: bool) -> bytes:
+    latencies = [
+        ("frame_to_publish_p50_ms", stats.frame_to_publish_p50_ms),
+        ("frame_to_publish_p99_ms", stats.frame_to_publish_p99_ms),
+    ]
+    for stage in stats.stages:
+        latencies += [("p50_ms", stage.p50_ms), ("p99_ms", stage.p99_ms)]
+    if validate:
+        for name, value in latencies:
+            _check_number("Stats", name, value)
+    out = struct.pack("<19Q", *(getattr(stats, name) for name in _STATS_COUNTERS))
+    out += struct.pack(
+        "<IffI",
+        stats.latency_window,
+        stats.frame_to_publish_p50_ms,
+        stats.frame_to_publish_p99_ms,
+        len(stats.stages),
+    )
+    for stage in stats.stages:
+        out += _text(stage.stage, "Stats", "stage", MAX_NAME_BYTES, validate)
+        out += struct.pack("<ff", stage.p50_ms, stage.p99_ms)
+    return out
+
+
+def encode_payload(message: AnyMessage, *, validate: bool = True) -> tuple[int, bytes]:
+    """The kind and payload of ``message``. See :func:`encode`."""
+    if isinstance(message, Hello):
+        return KIND_HELLO, struct.pack("<H", message.protocol_version) + _text(
+            message.server, "Hello", "server", MAX_NAME_BYTES, validate
+        )
+    if isinstance(message, Session):
+        return KIND_SESSION, struct.pack(
+            "<QQ", message.monotonic_ns, message.realtime_ns
+        ) + _options_payload(message.options, "Session", validate)
+    if isinstance(message, Shape):
+        return KIND_SHAPE, _shape_payload(message, validate)
+    if isinstance(message, Pose):
+        return KIND_POSE, _pose_payload(message, validate)
+    if isinstance(message, Remove):
+        return KIND_REMOVE, struct.pack("<Q", message.object_id)
+    if isinstance(message, SnapshotDone):
+        return KIND_SNAPSHOT_DONE, b""
+    if isinstance(message, Stats):
+        return KIND_STATS, _stats_payload(message, validate)
+    if isinstance(message, Goodbye):
+        return KIND_GOODBYE, _text(message.reason, "Goodbye", "reason", MAX_REASON_BYTES, validate)
+    if isinstance(message, Subscribe):
+        return KIND_SUBSCRIBE, _options_payload(message, "Subscribe", validate)
+    if isinstance(message, SubscribeV1):
+        return KIND_SUBSCRIBE_V1, b""
+    raise TypeError(f"not a tacmesh message: {message!r}")
+
+
+def encode(message: AnyMessage, *, validate: bool = True) -> bytes:
+    """``message`` as one frame.
+
+    A Shape is laid out in its ``encoding``: compact quantises its vertices to the nearest step
+    of their box and adds the quantisation bound to ``max_residual_m``. With ``validate`` (the
+    default) a message a receiver would refuse raises the :class:`WireError` the decoder would;
+    without it the bytes are written as they are (for tests of the refusals).
+    """
+    kind, payload = encode_payload(message, validate=validate)
+    length = 1 + len(payload)
+    if length > MAX_FRAME_BYTES and validate:
+        raise FrameTooLarge(f"a frame of {length} bytes, over the cap of {MAX_FRAME_BYTES}")
+    return struct.pack("<IB", length, kind) + payload
+
+
+def encode_subscribe(options: Subscribe = DEFAULT_OPTIONS) -> bytes:
+    """The Subscribe frame (0x81) asking for ``options``."""
+    return encode(options)
+
+
+def encode_subscribe_v1() -> bytes:
+    """Version 1's empty Subscribe (0x80), which a version-2 server refuses with a Goodbye."""
+    return encode(SubscribeV1())

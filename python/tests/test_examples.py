@@ -1,17 +1,26 @@
-"""The examples in python/examples, run against the real daemon on the simulated scene."""
+"""The examples in python/examples: on a made-up scene (a scripted fake daemon), and against the
+real daemon on the simulated scene."""
 
 from __future__ import annotations
 
 import importlib.util
+import math
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
 
-from tacmesh import Scene, Subscriber
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from tacmesh import Message, Pose, Scene, Session, Shape, SnapshotDone, Stats, Subscriber
+from tacmesh.wire import FIRST_SUPPORT_ID, SHAPE_CLOSED, SHAPE_SUPPORT, Hello
 
 from test_daemon import Daemon, daemon  # noqa: F401  (the fixture)
+from test_subscriber import FakeDaemon, Peer, wait_for_close
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -24,15 +33,177 @@ def example(name: str) -> ModuleType:
     return module
 
 
-def scene_after(daemon: Daemon, seconds: float) -> Scene:
+# ---- a made-up scene -------------------------------------------------------------------------
+
+
+def box(size: tuple[float, float, float]) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+    """A closed box centred on its frame's origin, counter-clockwise seen from outside."""
+    half = np.array(size) / 2
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    faces = [
+        [0, 1, 3, 2],  # x = -1
+        [4, 6, 7, 5],  # x = +1
+        [0, 4, 5, 1],  # y = -1
+        [2, 3, 7, 6],  # y = +1
+        [0, 2, 6, 4],  # z = -1
+        [1, 5, 7, 3],  # z = +1
+    ]
+    triangles = [t for a, b, c, d in faces for t in ([a, b, c], [a, c, d])]
+    return corners.astype(np.float32), np.array(triangles, np.uint32)
+
+
+def pose(
+    object_id: int, version: int, t_ns: int, xyz: tuple[float, float, float], yaw: float
+) -> Pose:
+    return Pose(
+        object_id,
+        version,
+        t_ns,
+        t_ns + 10**18,
+        t_ns,
+        rotation=(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)),
+        translation=xyz,
+    )
+
+
+def made_up_shapes() -> list[Shape]:
+    """A 2 m table (z = 0, up +z) and three boxes standing on it, each placed by its pose."""
+    table = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    shapes = [
+        Shape(
+            pose(FIRST_SUPPORT_ID, 1, 100, (0.0, 0.0, 0.0), 0.0),
+            100,
+            100 + 10**18,
+            SHAPE_SUPPORT,
+            2,
+            2,
+            0.0,
+            table,
+            np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+        )
+    ]
+    for object_id, size, x in [
+        (1, (0.2, 0.2, 0.3), -0.3),
+        (2, (0.1, 0.1, 0.1), 0.0),
+        (3, (0.1, 0.2, 0.1), 0.3),
+    ]:
+        vertices, triangles = box(size)
+        shapes.append(
+            Shape(
+                pose(object_id, 1, 100, (x, 0.0, size[2] / 2), 0.3),
+                100,
+                100 + 10**18,
+                SHAPE_CLOSED,
+                12,
+                12,
+                0.001,
+                vertices,
+                triangles,
+            )
+        )
+    return shapes
+
+
+def made_up_scene() -> Scene:
     scene = Scene()
+    messages: list[Message] = [Session(1, 2), *made_up_shapes(), SnapshotDone()]
+    for message in messages:
+        scene.apply(message)
+    return scene
+
+
+def test_mujoco_made_up_the_probe_rests_on_the_tallest_box() -> None:
+    mujoco_scene = example("mujoco_scene")
+    scene = made_up_scene()
+    rest, top = mujoco_scene.drop_probe(scene)
+    assert top == pytest.approx(0.3, abs=1e-5)
+    assert abs(rest - (top + mujoco_scene.PROBE_RADIUS_M)) < 0.01, (rest, top)
+    assert mujoco_scene.model_of(scene).nmesh == 3
+
+
+def test_mujoco_made_up_a_pose_moves_a_body_without_a_rebuild() -> None:
+    mujoco_scene = example("mujoco_scene")
+    scene = made_up_scene()
+    live = mujoco_scene.LiveModel()
+    assert live.update(scene) is True
+    moved = pose(2, 1, 200, (0.1, 0.2, 0.05), 1.0)
+    scene.apply(moved)
+    assert live.update(scene) is False
+    assert (live.rebuilds, live.moves) == (1, 1)
+    position, quat = live.body_pose(2)
+    np.testing.assert_allclose(position, moved.translation)
+    np.testing.assert_allclose(quat, [math.cos(0.5), 0, 0, math.sin(0.5)], atol=1e-7)
+    # Where MuJoCo has the geom is where the scene has the object.
+    import mujoco  # type: ignore[import-untyped]
+
+    geom = mujoco.mj_name2id(live.model, mujoco.mjtObj.mjOBJ_GEOM, "object2")
+    centre = scene.objects[2].mesh.vertices.mean(axis=0)
+    np.testing.assert_allclose(live.data.geom_xpos[geom], centre, atol=1e-5)
+    # A new shape version rebuilds it.
+    scene.apply(
+        replace(
+            made_up_shapes()[2],
+            pose=replace(moved, shape_version=2, pose_time_ns=300, last_seen_ns=300),
+        )
+    )
+    assert live.update(scene) is True and live.rebuilds == 2
+
+
+def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(tmp_path: Path) -> None:
+    import rerun as rr
+
+    def script(peer: Peer) -> None:
+        peer.send(Hello(2, "fake"), Session(1, 2), *made_up_shapes(), SnapshotDone())
+        peer.receive()
+        peer.send(pose(1, 1, 200, (-0.25, 0.0, 0.15), 0.5), Stats(monotonic_ns=300))
+        peer.send(pose(1, 1, 300, (-0.2, 0.0, 0.15), 0.6), Stats(monotonic_ns=400))
+        wait_for_close(peer)
+
+    rerun_log = example("rerun_log")
+    fake = FakeDaemon(tmp_path / "d.sock", script)
+    recording = tmp_path / "scene.rrd"
+    rr.init("tacmesh-test")
+    rr.save(recording)
+    counts = rerun_log.log_stream(tmp_path / "d.sock", 0.2)
+    rr.disconnect()
+    fake.join()
+    assert counts["shapes"] == 4 and counts["poses"] >= 1 and counts["stats"] >= 1, counts
+    printed = rrd_print(recording)
+    meshes = entities_with(printed, "Mesh3D:vertex_positions")
+    assert {"/objects/1", "/objects/2", "/objects/3", "/supports/0"} <= meshes, printed[-3000:]
+    assert {"/objects/1", "/supports/0"} <= entities_with(printed, "Transform3D:"), printed[-3000:]
+
+
+def rrd_print(recording: Path) -> str:
+    """Rerun's own reading of a recording."""
+    return subprocess.run(
+        [str(Path(sys.executable).parent / "rerun"), "rrd", "print", str(recording)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+
+
+def entities_with(printed: str, component: str) -> set[str]:
+    """The entity paths `rerun rrd print` shows a chunk of `component` for (its lines read
+    "Chunk(…) with N rows (…) - /entity/path - data columns: […]")."""
+    return {
+        line.split(" - ")[1]
+        for line in printed.splitlines()
+        if component in line and line.count(" - ") >= 2
+    }
+
+
+# ---- against the daemon ----------------------------------------------------------------------
+
+
+def scene_after(daemon: Daemon, seconds: float) -> Scene:
     deadline = time.monotonic() + seconds
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as subscriber:
-        for message in subscriber:
-            scene.apply(message)
-            if scene.complete and time.monotonic() > deadline:
+        for _ in subscriber:
+            if subscriber.scene.complete and time.monotonic() > deadline:
                 break
-    return scene
+    return subscriber.scene
 
 
 def test_mujoco_a_probe_dropped_on_an_object_rests_on_its_top(daemon: Daemon) -> None:
@@ -43,30 +214,36 @@ def test_mujoco_a_probe_dropped_on_an_object_rests_on_its_top(daemon: Daemon) ->
     # on the support below it and not inside the object.
     assert abs(rest - (top + mujoco_scene.PROBE_RADIUS_M)) < 0.01, (rest, top)
     model = mujoco_scene.model_of(scene)
-    objects = sum(not o.is_plane and len(o.triangles) >= 4 for o in scene.objects.values())
+    objects = sum(not o.is_support and len(o.triangles) >= 4 for o in scene.objects.values())
     assert model.nmesh == objects >= 3
 
 
-def test_rerun_the_stream_is_logged_as_meshes_and_scalars(daemon: Daemon, tmp_path: Path) -> None:
+def test_mujoco_the_live_model_follows_poses_without_rebuilding(daemon: Daemon) -> None:
+    mujoco_scene = example("mujoco_scene")
+    scene, live = mujoco_scene.follow(str(daemon.socket_path), 4.0)
+    # The cone slides by Poses: the bodies move far more often than the model is rebuilt.
+    assert live.moves > 0 and live.rebuilds >= 1, (live.moves, live.rebuilds)
+    for o in mujoco_scene.meshed(scene):
+        if o.object_id in live._mocap:
+            position, _ = live.body_pose(o.object_id)
+            np.testing.assert_allclose(position, o.pose.translation, atol=1e-6)
+
+
+def test_rerun_the_stream_is_logged_as_meshes_transforms_and_scalars(
+    daemon: Daemon, tmp_path: Path
+) -> None:
     import rerun as rr
 
     rerun_log = example("rerun_log")
     recording = tmp_path / "scene.rrd"
     rr.init("tacmesh-test")
     rr.save(recording)
-    counts = rerun_log.log_stream(daemon.socket_path, 2.0)
+    counts = rerun_log.log_stream(daemon.socket_path, 3.0, encoding="compact")
     rr.disconnect()
-    assert counts["upserts"] >= 4 and counts["stats"] >= 1, counts
-    # Read it back with Rerun's own tool: each object's mesh and the plane are there.
-    printed = subprocess.run(
-        [str(Path(sys.executable).parent / "rerun"), "rrd", "print", str(recording)],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
-    meshes = {
-        line.split(" - ")[1] for line in printed.splitlines() if "Mesh3D:vertex_positions" in line
-    }
-    assert any(m.startswith("/objects/") for m in meshes), printed[-2000:]
-    assert "/planes/0" in meshes, printed[-2000:]
+    assert counts["shapes"] >= 4 and counts["poses"] >= 1 and counts["stats"] >= 1, counts
+    printed = rrd_print(recording)
+    meshes = entities_with(printed, "Mesh3D:vertex_positions")
+    assert any(m.startswith("/objects/") for m in meshes), printed[-3000:]
+    assert any(m.startswith("/supports/") for m in meshes), printed[-3000:]
+    assert any(m.startswith("/objects/") for m in entities_with(printed, "Transform3D:"))
     assert "/stats/frames_in" in printed
