@@ -26,6 +26,8 @@ pub use tacmesh_simplify as simplify;
 pub use tacmesh_source as source;
 pub use tacmesh_source::{glam, PointCloud, TriMesh};
 pub use tacmesh_track as track;
+#[cfg(feature = "zenoh")]
+pub use tacmesh_zenoh as zenoh;
 
 /// Locks a mutex, taking the data even if another thread panicked while holding it: every
 /// structure guarded here stays consistent between statements, and a daemon that keeps

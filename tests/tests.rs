@@ -12,3 +12,5 @@ mod real_scenes;
 mod reliability;
 mod replay;
 mod systemd;
+#[cfg(feature = "zenoh")]
+mod zenoh;

@@ -31,14 +31,17 @@ const CLIENT_BUFFER_CAP: usize = 64 * 1024;
 const SNAPSHOT_DONE: [u8; 5] = [1, 0, 0, 0, 4];
 
 /// An object's shape, encoded both ways (a subscriber asks for one), and its version.
-pub(crate) struct ShapeFrames {
-    pub(crate) version: u64,
-    pub(crate) full: Vec<u8>,
-    pub(crate) compact: Vec<u8>,
+pub struct EncodedShape {
+    pub version: u64,
+    /// The Shape frame in [`Encoding::Full`](tacmesh_protocol::Encoding::Full).
+    pub full: Vec<u8>,
+    /// The Shape frame in [`Encoding::Compact`](tacmesh_protocol::Encoding::Compact).
+    pub compact: Vec<u8>,
 }
 
-impl ShapeFrames {
-    fn bytes(&self, encoding: tacmesh_protocol::Encoding) -> &[u8] {
+impl EncodedShape {
+    /// The frame in `encoding`.
+    pub fn bytes(&self, encoding: tacmesh_protocol::Encoding) -> &[u8] {
         match encoding {
             tacmesh_protocol::Encoding::Full => &self.full,
             tacmesh_protocol::Encoding::Compact => &self.compact,
@@ -49,7 +52,7 @@ impl ShapeFrames {
 /// What is current of one object: its shape, and a pose newer than the one inside the shape.
 #[derive(Clone, Default)]
 pub(crate) struct ObjectFrames {
-    pub(crate) shape: Option<Arc<ShapeFrames>>,
+    pub(crate) shape: Option<Arc<EncodedShape>>,
     pub(crate) pose: Option<Arc<Vec<u8>>>,
 }
 
@@ -151,7 +154,7 @@ impl Client {
     }
 
     /// A new shape of an object (it replaces an unsent shape and pose of it).
-    pub(crate) fn queue_shape(&self, object_id: u64, frames: &Arc<ShapeFrames>) {
+    pub(crate) fn queue_shape(&self, object_id: u64, frames: &Arc<EncodedShape>) {
         let mut pending = lock(&self.pending);
         if !passes(&pending.options, object_id) {
             return;

@@ -39,7 +39,8 @@ use tacmesh_protocol::{
     encode, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
 };
 
-use crate::client::{Client, ObjectFrames, Retire, ShapeFrames};
+pub use crate::client::EncodedShape;
+use crate::client::{Client, ObjectFrames, Retire};
 
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
@@ -63,6 +64,23 @@ pub const SEND_BUFFER_BYTES: usize = 2 * 1024;
 /// How long [`Publisher::shutdown`] waits for subscribers to take their `Goodbye` before it
 /// closes their sockets anyway.
 pub const GOODBYE_GRACE: Duration = Duration::from_secs(1);
+
+/// Another way out for what is published (Zenoh, for subscribers on other machines): it is
+/// handed every update as the Unix socket's subscribers get it, already encoded, in the order
+/// the pipeline publishes. Each call is made with the publisher's state locked and must return
+/// at once (queue the update; never wait on a network).
+pub trait Mirror: Send + Sync {
+    /// A new shape of an object, with the pose it comes with.
+    fn shape(&self, object_id: u64, shape: &Arc<EncodedShape>);
+    /// A new pose of an object's published shape (a Pose frame).
+    fn pose(&self, object_id: u64, frame: &Arc<Vec<u8>>);
+    /// The object is gone.
+    fn remove(&self, object_id: u64);
+    /// The latest Stats frame.
+    fn stats(&self, frame: &Arc<Vec<u8>>);
+    /// The daemon stops: send what is queued, then stop (bounded in time).
+    fn shutdown(&self);
+}
 
 /// Where and how to publish.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -267,6 +285,8 @@ struct State {
     /// subscriber gets.
     objects: BTreeMap<u64, ObjectFrames>,
     clients: BTreeMap<u64, Arc<Client>>,
+    /// Other ways out (see [`Mirror`]).
+    mirrors: Vec<Arc<dyn Mirror>>,
     next_client: u64,
     /// Set by shutdown: no new subscribers.
     stopping: bool,
@@ -393,7 +413,7 @@ impl Publisher {
                 .map(|()| bytes)
                 .map_err(|cause| PublishError::EncodeShape { object_id, cause })
         };
-        let frames = Arc::new(ShapeFrames {
+        let frames = Arc::new(EncodedShape {
             version,
             full: encode_as(Encoding::Full)?,
             compact: encode_as(Encoding::Compact)?,
@@ -419,6 +439,9 @@ impl Publisher {
         );
         for client in state.clients.values() {
             client.queue_shape(object_id, &frames);
+        }
+        for mirror in &state.mirrors {
+            mirror.shape(object_id, &frames);
         }
         Ok(())
     }
@@ -454,6 +477,9 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_pose(object_id, &frame);
         }
+        for mirror in &state.mirrors {
+            mirror.pose(object_id, &frame);
+        }
         Ok(())
     }
 
@@ -466,6 +492,9 @@ impl Publisher {
         }
         for client in state.clients.values() {
             client.queue_remove(object_id);
+        }
+        for mirror in &state.mirrors {
+            mirror.remove(object_id);
         }
     }
 
@@ -481,7 +510,25 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_stats(&frame);
         }
+        for mirror in &state.mirrors {
+            mirror.stats(&frame);
+        }
         Ok(())
+    }
+
+    /// Hands every update from now on to `mirror` too, starting with the current shape and pose
+    /// of every object.
+    pub fn add_mirror(&self, mirror: Arc<dyn Mirror>) {
+        let mut state = lock(&self.shared.state);
+        for (&object_id, frames) in &state.objects {
+            if let Some(shape) = &frames.shape {
+                mirror.shape(object_id, shape);
+            }
+            if let Some(pose) = &frames.pose {
+                mirror.pose(object_id, pose);
+            }
+        }
+        state.mirrors.push(mirror);
     }
 
     /// The counters so far.
@@ -523,11 +570,17 @@ impl Publisher {
         }
         let goodbye = Arc::new(goodbye);
 
-        let clients: Vec<Arc<Client>> = {
+        let (clients, mirrors): (Vec<Arc<Client>>, Vec<Arc<dyn Mirror>>) = {
             let mut state = lock(&self.shared.state);
             state.stopping = true;
-            state.clients.values().cloned().collect()
+            (
+                state.clients.values().cloned().collect(),
+                std::mem::take(&mut state.mirrors),
+            )
         };
+        for mirror in &mirrors {
+            mirror.shutdown();
+        }
         for client in &clients {
             client.say_goodbye(&goodbye);
         }

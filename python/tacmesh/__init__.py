@@ -4,6 +4,7 @@ current scene, reconnection.
 See README.md beside this package, and docs/protocol.md in the repository for the wire format.
 """
 
+from .over_zenoh import ZenohSubscriber
 from .subscriber import (
     Mesh,
     Refused,
@@ -42,6 +43,7 @@ from .wire import (
 )
 
 __all__ = [
+    "ZenohSubscriber",
     "DEFAULT_OPTIONS",
     "FIRST_PLANE_ID",
     "FIRST_SUPPORT_ID",

@@ -62,6 +62,13 @@ pub fn init_logging(verbose: u8, config_level: Option<&str>) {
         1 => "debug",
         _ => "trace",
     };
+    // Zenoh (with the `zenoh` feature) logs every network interface it can be reached on at
+    // info; at the default level only its warnings come through.
+    let fallback = if fallback == "info" {
+        "info,zenoh=warn"
+    } else {
+        fallback
+    };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fallback));
     // A closed or broken standard error (a log reader that went away, a restarted journald)

@@ -46,6 +46,66 @@ pub struct SubscribeArgs {
     /// Only these object ids (repeat, or separate with commas)
     #[arg(long = "id", value_name = "ID", value_delimiter = ',')]
     ids: Vec<u64>,
+    /// Read from Zenoh instead of the socket, joining as FILE's [zenoh] section says (the same
+    /// section as the daemon's, with `connect` naming the daemon's or a router's endpoint);
+    /// needs a build with the `zenoh` feature
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "only", "ids"])]
+    zenoh: Option<PathBuf>,
+}
+
+/// Where the messages come from: the daemon's socket, or Zenoh.
+enum Source {
+    Socket(Subscription),
+    #[cfg(feature = "zenoh")]
+    Zenoh(tacmesh::zenoh::ZenohSubscription),
+}
+
+impl Source {
+    fn open(args: &SubscribeArgs) -> anyhow::Result<(Source, String)> {
+        if let Some(file) = &args.zenoh {
+            return Self::open_zenoh(file);
+        }
+        let socket = args.socket.clone().unwrap_or_else(default_socket_path);
+        let subscription = Subscription::connect_with(&socket, None, args.options())?;
+        let from = format!("{} on {}", subscription.server, socket.display());
+        Ok((Source::Socket(subscription), from))
+    }
+
+    #[cfg(feature = "zenoh")]
+    fn open_zenoh(file: &Path) -> anyhow::Result<(Source, String)> {
+        let config = tacmesh::daemon::DaemonConfig::load(file)?;
+        let section = config.zenoh.with_context(|| {
+            format!(
+                "{} has no [zenoh] section to join Zenoh with",
+                file.display()
+            )
+        })?;
+        let settings = section.settings()?;
+        let subscription =
+            tacmesh::zenoh::ZenohSubscription::connect(&settings, Duration::from_secs(5))?;
+        let from = format!("Zenoh, robot {:?}", settings.robot);
+        Ok((Source::Zenoh(subscription), from))
+    }
+
+    #[cfg(not(feature = "zenoh"))]
+    fn open_zenoh(_: &Path) -> anyhow::Result<(Source, String)> {
+        anyhow::bail!(
+            "this tacmesh was built without the `zenoh` feature: build it with \
+             `cargo build --release --features zenoh` to subscribe over Zenoh"
+        )
+    }
+
+    fn next_message(&mut self) -> anyhow::Result<Message> {
+        match self {
+            Source::Socket(subscription) => Ok(subscription.next_message()?),
+            #[cfg(feature = "zenoh")]
+            Source::Zenoh(subscription) => loop {
+                if let Some(message) = subscription.next_message(Duration::from_secs(60))? {
+                    return Ok(message);
+                }
+            },
+        }
+    }
 }
 
 impl SubscribeArgs {
@@ -90,7 +150,6 @@ pub fn run(args: SubscribeArgs) -> anyhow::Result<()> {
 
 fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
-    let socket = args.socket.clone().unwrap_or_else(default_socket_path);
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
@@ -106,13 +165,8 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
         "--id: at most {} ids",
         tacmesh::protocol::MAX_SUBSCRIBE_IDS
     );
-    let mut subscription = Subscription::connect_with(&socket, None, args.options())?;
-    writeln!(
-        out,
-        "connected to {} on {}",
-        subscription.server,
-        socket.display()
-    )?;
+    let (mut subscription, from) = Source::open(&args)?;
+    writeln!(out, "connected to {from}")?;
     let mut updates = 0u64;
     let mut scene = Scene::new();
     loop {

@@ -22,6 +22,9 @@ pub struct DaemonConfig {
     pub mesh: MeshSection,
     pub stats: StatsSection,
     pub log: LogSection,
+    /// Publish over Zenoh too (for subscribers on other machines). Default: off; the Unix
+    /// socket is then the only way in. Needs a build with the `zenoh` feature.
+    pub zenoh: Option<ZenohSection>,
 }
 
 impl Default for DaemonConfig {
@@ -35,7 +38,77 @@ impl Default for DaemonConfig {
             mesh: MeshSection::default(),
             stats: StatsSection::default(),
             log: LogSection::default(),
+            zenoh: None,
         }
+    }
+}
+
+/// The `[zenoh]` section: how the daemon (or `tacmesh subscribe --zenoh`) joins a Zenoh network
+/// and under which robot name its objects are published (docs/operating.md, "Across the
+/// network").
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZenohSection {
+    /// The robot's name in every key expression: `tacmesh/<robot>/objects/<id>/shape`, …
+    /// Letters, digits, `-` and `_`. Default `"robot"`.
+    pub robot: String,
+    /// `"peer"` (default), `"client"` (only through a Zenoh router) or `"router"`.
+    pub mode: String,
+    /// Endpoints to listen on, such as `"tcp/127.0.0.1:7447"`. Default: none.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (a router or a peer), such as `"tcp/192.0.2.10:7447"`.
+    /// Default: none.
+    pub connect: Vec<String>,
+    /// Find peers by UDP multicast on the local network. Default false: name the endpoints.
+    pub multicast_scouting: bool,
+    /// A Zenoh configuration file (JSON5) the settings above are applied on top of: TLS,
+    /// access control, timeouts. Default: none.
+    pub config_file: Option<PathBuf>,
+    /// How shapes are encoded on Zenoh: `"compact"` (default: a wide-area link counts every
+    /// byte) or `"full"`.
+    pub encoding: String,
+}
+
+impl Default for ZenohSection {
+    fn default() -> Self {
+        Self {
+            robot: "robot".into(),
+            mode: "peer".into(),
+            listen: Vec::new(),
+            connect: Vec::new(),
+            multicast_scouting: false,
+            config_file: None,
+            encoding: "compact".into(),
+        }
+    }
+}
+
+impl ZenohSection {
+    /// The shape encoding `encoding` names.
+    pub fn shape_encoding(&self) -> Result<tacmesh_protocol::Encoding, ConfigError> {
+        match self.encoding.as_str() {
+            "compact" => Ok(tacmesh_protocol::Encoding::Compact),
+            "full" => Ok(tacmesh_protocol::Encoding::Full),
+            other => Err(ConfigError::OutOfRange {
+                key: "zenoh.encoding",
+                value: format!("{other:?}"),
+                expected: "\"compact\" or \"full\"",
+            }),
+        }
+    }
+
+    /// The settings the Zenoh crate takes.
+    #[cfg(feature = "zenoh")]
+    pub fn settings(&self) -> Result<tacmesh_zenoh::ZenohSettings, ConfigError> {
+        Ok(tacmesh_zenoh::ZenohSettings {
+            robot: self.robot.clone(),
+            mode: self.mode.clone(),
+            listen: self.listen.clone(),
+            connect: self.connect.clone(),
+            multicast_scouting: self.multicast_scouting,
+            config_file: self.config_file.clone(),
+            encoding: self.shape_encoding()?,
+        })
     }
 }
 
@@ -283,6 +356,15 @@ pub enum ConfigError {
         expected: &'static str,
     },
     #[error(
+        "config: a [{section}] section, but this tacmesh was built without the `{feature}` \
+         feature: build it with `cargo build --release --features {feature}`, or remove the \
+         section"
+    )]
+    FeatureMissing {
+        section: &'static str,
+        feature: &'static str,
+    },
+    #[error(
         "config: socket.mode = {value} is world-writable, which would let every local user \
          connect, read every mesh and flood the daemon; use \"0660\" with socket.group (or \
          socket.allow_users / socket.allow_groups) to choose who may subscribe"
@@ -408,6 +490,15 @@ impl DaemonConfig {
                 value: format!("{:?}", self.log.level),
                 expected: "a level (error, warn, info, debug, trace, off) or a filter such as \"info,tacmesh=debug\"",
             });
+        }
+        if let Some(zenoh) = &self.zenoh {
+            zenoh.shape_encoding()?;
+            if !cfg!(feature = "zenoh") {
+                return Err(ConfigError::FeatureMissing {
+                    section: "zenoh",
+                    feature: "zenoh",
+                });
+            }
         }
         Ok(())
     }
@@ -606,6 +697,26 @@ const KEY_WANTS: &[(&str, &str)] = &[
     ("mesh", "a [mesh] table (see tacmesh.example.toml)"),
     ("stats", "a [stats] table (see tacmesh.example.toml)"),
     ("log", "a [log] table (see tacmesh.example.toml)"),
+    (
+        "zenoh.robot",
+        "a name of letters, digits, - and _, for example \"arm-1\"",
+    ),
+    (
+        "zenoh.listen",
+        "a list of Zenoh endpoints, for example [\"tcp/0.0.0.0:7447\"]",
+    ),
+    (
+        "zenoh.connect",
+        "a list of Zenoh endpoints, for example [\"tcp/192.0.2.10:7447\"]",
+    ),
+    ("zenoh.multicast_scouting", "true or false"),
+    ("zenoh.mode", "\"peer\", \"client\" or \"router\""),
+    ("zenoh.encoding", "\"compact\" or \"full\""),
+    (
+        "zenoh.config_file",
+        "a file path string, for example \"/etc/tacmesh/zenoh.json5\"",
+    ),
+    ("zenoh", "a [zenoh] table (see tacmesh.example.toml)"),
 ];
 
 /// What `key` (a dotted path) wants, in words.
@@ -708,6 +819,28 @@ mod tests {
     #[test]
     fn an_empty_file_is_the_defaults() {
         assert_eq!(parse("").unwrap(), DaemonConfig::default());
+    }
+
+    /// A [zenoh] section needs the feature, says so when it is missing, and takes only the
+    /// encodings there are.
+    #[test]
+    fn a_zenoh_section_is_checked_and_needs_the_feature() {
+        let text = "[zenoh]\nrobot = \"arm-1\"\nlisten = [\"tcp/127.0.0.1:7447\"]\n";
+        match parse(text) {
+            #[cfg(feature = "zenoh")]
+            Ok(config) => {
+                let settings = config.zenoh.expect("a section").settings().unwrap();
+                assert_eq!(settings.robot, "arm-1");
+                assert_eq!(settings.encoding, tacmesh_protocol::Encoding::Compact);
+            }
+            #[cfg(not(feature = "zenoh"))]
+            Err(err @ ConfigError::FeatureMissing { .. }) => {
+                assert!(err.to_string().contains("--features zenoh"), "{err}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let err = parse("[zenoh]\nencoding = \"gzip\"\n").unwrap_err();
+        assert!(err.to_string().contains("zenoh.encoding"), "{err}");
     }
 
     #[test]
@@ -861,6 +994,15 @@ mod tests {
             .lines()
             .map(|line| match line.strip_prefix("# ") {
                 Some(rest) if rest.split_once(" = ").is_some_and(|(k, _)| is_bare_key(k)) => {
+                    rest.to_owned()
+                }
+                // An optional section's header (`# [zenoh]`).
+                Some(rest)
+                    if rest
+                        .strip_prefix('[')
+                        .and_then(|r| r.strip_suffix(']'))
+                        .is_some_and(is_bare_key) =>
+                {
                     rest.to_owned()
                 }
                 _ => line.to_owned(),

@@ -59,6 +59,9 @@ pub enum DaemonError {
     Sensor(#[from] Box<SensorError>),
     #[error(transparent)]
     Publish(#[from] PublishError),
+    #[cfg(feature = "zenoh")]
+    #[error("config [zenoh]: {0}")]
+    Zenoh(#[from] tacmesh_zenoh::ZenohError),
     /// Not `#[from]`: that would make the message's `{0}` a source too, printed twice by an
     /// error chain printer.
     #[error("config [track]: {0}")]
@@ -177,6 +180,11 @@ impl Daemon {
         publisher_config.mode = config.socket_mode()?;
         (publisher_config.group, publisher_config.allowed_peers) = config.socket_access()?;
         let publisher = Publisher::bind(publisher_config)?;
+        #[cfg(feature = "zenoh")]
+        if let Some(section) = &config.zenoh {
+            let mirror = tacmesh_zenoh::ZenohMirror::start(&section.settings()?)?;
+            publisher.add_mirror(mirror);
+        }
         for (_, _, source) in &sensors {
             if let Some(source) = source {
                 tracing::info!("reading {}", source.name());
