@@ -11,7 +11,8 @@
 //! Stats message), peak RSS (VmHWM from /proc), bytes per second on the socket, and what one
 //! subscriber saw (shapes, poses, removes and their bytes, data age at arrival). With
 //! `BENCH_ENCODING=compact` in the environment the subscriber asks for compact shapes, with
-//! `BENCH_MAX_RATE_HZ=N` for at most N updates a second per object.
+//! `BENCH_MAX_RATE_HZ=N` for at most N updates a second per object, with `BENCH_EXTRAPOLATE=1`
+//! for only the poses a client extrapolating by velocity needs.
 //! Prints a Markdown table for BENCHMARKS.md. Not a test: nothing here asserts a time.
 
 mod support;
@@ -56,12 +57,15 @@ fn main() {
         .ok()
         .and_then(|rate| rate.parse().ok())
         .unwrap_or(0.0);
-    let options = (encoding == Encoding::Compact || max_rate_hz > 0.0).then(|| Subscribe {
-        encoding,
-        resend: true,
-        max_rate_hz,
-        ..Subscribe::default()
-    });
+    let extrapolate = std::env::var("BENCH_EXTRAPOLATE").is_ok_and(|v| v == "1");
+    let options =
+        (encoding == Encoding::Compact || max_rate_hz > 0.0 || extrapolate).then(|| Subscribe {
+            encoding,
+            resend: true,
+            extrapolate,
+            max_rate_hz,
+            ..Subscribe::default()
+        });
     let mut subscription =
         Subscription::connect_with(&socket, Some(Duration::from_secs(5)), options)
             .expect("subscribes");
@@ -159,8 +163,8 @@ fn main() {
     let pct = |q: f64| pct_of(&ages_ms, q);
 
     println!(
-        "\n## tacmesh run, {sensor}, {seconds:.0} s, {encoding:?} encoding, rate cap {max_rate_hz} Hz \
-         (exit {status})\n"
+        "\n## tacmesh run, {sensor}, {seconds:.0} s, {encoding:?} encoding, rate cap {max_rate_hz} Hz, \
+         extrapolating {extrapolate} (exit {status})\n"
     );
     println!("| measure | value |\n|---|---|");
     println!("| frames from sensor | {} ({fps:.1} fps) |", s1.frames_in);

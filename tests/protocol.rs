@@ -82,7 +82,12 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
         resend: true,
         ..Subscribe::default()
     });
-    let readers: Vec<_> = [full, compact, supports]
+    let extrapolating = daemon.subscribe_with(Subscribe {
+        extrapolate: true,
+        resend: true,
+        ..Subscribe::default()
+    });
+    let readers: Vec<_> = [full, compact, supports, extrapolating]
         .into_iter()
         .map(|s| std::thread::spawn(move || read_for(s, RUN)))
         .collect();
@@ -122,9 +127,10 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
     assert!(daemon.running(), "the daemon died:\n{}", daemon.log());
     let (status, _) = daemon.terminate();
     assert!(status.success(), "{status}");
-    let supports_read = read.pop().expect("three readers");
-    let compact_read = read.pop().expect("three readers");
-    let full_read = read.pop().expect("three readers");
+    let extrapolating_read = read.pop().expect("four readers");
+    let supports_read = read.pop().expect("four readers");
+    let compact_read = read.pop().expect("four readers");
+    let full_read = read.pop().expect("four readers");
 
     check_conversation_and_times(&full_read);
     let moving = check_moves_are_poses(&full_read);
@@ -132,6 +138,92 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
     check_stats(&full_read);
     check_compact_against_full(&compact_read, &full_read, moving);
     check_kind_filter(&supports_read);
+    check_extrapolation(&extrapolating_read, &full_read, moving);
+}
+
+/// A client that extrapolates poses by their velocity is sent far fewer of the cone's Poses,
+/// and at the time of every pose the daemon published (as the full subscriber read them), its
+/// extrapolation of the last pose it was sent is within 2 mm and 1° of it.
+fn check_extrapolation(extrapolating: &Read1, full: &Read1, cone: u64) {
+    use tacmesh::protocol::{Pose, EXTRAPOLATION_TOLERANCE_M, EXTRAPOLATION_TOLERANCE_RAD};
+    let second = extrapolating
+        .messages
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, _, m))| matches!(m, Message::Session(_)))
+        .nth(1)
+        .map(|(k, _)| k)
+        .expect("the Session answering the Subscribe");
+    // The poses it was told of the cone: inside Shapes and as Poses, in order.
+    let told: Vec<Pose> = extrapolating.messages[second..]
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            Message::Shape(s) if s.object_id() == cone => Some(s.pose),
+            Message::Pose(p) if p.object_id == cone => Some(*p),
+            _ => None,
+        })
+        .collect();
+    let truth: Vec<Pose> = full
+        .messages
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            Message::Pose(p) if p.object_id == cone => Some(*p),
+            _ => None,
+        })
+        .collect();
+    let (first, last) = (
+        told.first().expect("the cone").pose_time_ns,
+        told.last().expect("the cone").pose_time_ns,
+    );
+    let mut checked = 0;
+    let mut worst = (0.0f32, 0.0f32);
+    for pose in truth
+        .iter()
+        .filter(|p| p.pose_time_ns >= first && p.pose_time_ns <= last)
+    {
+        let Some(known) = told
+            .iter()
+            .rev()
+            .find(|t| t.pose_time_ns <= pose.pose_time_ns)
+        else {
+            continue;
+        };
+        if known.shape_version != pose.shape_version {
+            continue; // a new shape, with its own pose, is sent whatever its pose
+        }
+        let (rotation, translation) = known.extrapolated_parts(pose.pose_time_ns);
+        let off = (
+            translation.distance(pose.translation),
+            rotation.angle_between(pose.rotation),
+        );
+        worst = (worst.0.max(off.0), worst.1.max(off.1));
+        assert!(
+            off.0 <= EXTRAPOLATION_TOLERANCE_M + 1e-5
+                && off.1 <= EXTRAPOLATION_TOLERANCE_RAD + 1e-4,
+            "at {} the extrapolation is off by {:.2} mm, {:.2}°",
+            pose.pose_time_ns,
+            off.0 * 1e3,
+            off.1.to_degrees()
+        );
+        checked += 1;
+    }
+    let told_poses = extrapolating.messages[second..]
+        .iter()
+        .filter(|(_, _, m)| matches!(m, Message::Pose(p) if p.object_id == cone))
+        .count();
+    eprintln!(
+        "extrapolating: {told_poses} poses of the cone where the full subscriber read {}; \
+         {checked} checked, worst {:.2} mm, {:.2}°",
+        truth.len(),
+        worst.0 * 1e3,
+        worst.1.to_degrees()
+    );
+    assert!(checked >= 60, "only {checked} of the cone's poses checked");
+    assert!(
+        told_poses * 3 <= truth.len(),
+        "{told_poses} poses to the extrapolating client, {} to the other",
+        truth.len()
+    );
 }
 
 /// Hello, Session (both clocks now), Shapes, SnapshotDone; then per object: versions, shape

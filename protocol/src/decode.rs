@@ -8,7 +8,8 @@ use tacmesh_source::TriMesh;
 use crate::encode::{
     check_flags, check_id_count, check_kinds, check_number, check_pose, check_triangle,
     check_vertex, compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, ID_BYTES, PREFIX_BYTES,
-    SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_RESEND, TRIANGLE_BYTES, VERTEX_BYTES,
+    SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND, TRIANGLE_BYTES,
+    VERTEX_BYTES,
 };
 use crate::error::WireError;
 use crate::message::{
@@ -140,7 +141,12 @@ fn decode_frame(frame: &[u8], from: Sender) -> Result<Message, WireError> {
 fn read_options(r: &mut Reader<'_>) -> Result<Subscribe, WireError> {
     let encoding = r.encoding()?;
     let flags = r.u8("flags")?;
-    check_flags(r.message, "flags", flags, SUBSCRIBE_RESEND)?;
+    check_flags(
+        r.message,
+        "flags",
+        flags,
+        SUBSCRIBE_RESEND | SUBSCRIBE_EXTRAPOLATE,
+    )?;
     let max_rate_hz = r.f32("max_rate_hz")?;
     check_number("max_rate_hz", max_rate_hz)?;
     let kinds = check_kinds(r.message, r.u8("kinds")?)?;
@@ -153,6 +159,7 @@ fn read_options(r: &mut Reader<'_>) -> Result<Subscribe, WireError> {
     Ok(Subscribe {
         encoding,
         resend: flags & SUBSCRIBE_RESEND != 0,
+        extrapolate: flags & SUBSCRIBE_EXTRAPOLATE != 0,
         max_rate_hz,
         kinds,
         object_ids,

@@ -44,8 +44,9 @@ pub(crate) const STAGE_FIXED_BYTES: usize = 2 + 2 * 4;
 
 /// The bits a Shape's `flags` may have.
 pub(crate) const SHAPE_FLAGS: u8 = SHAPE_CLOSED | SHAPE_SUPPORT;
-/// Subscribe's `flags`: bit 0 `resend`.
+/// Subscribe's `flags`: bit 0 `resend`, bit 1 `extrapolate`.
 pub(crate) const SUBSCRIBE_RESEND: u8 = 1;
+pub(crate) const SUBSCRIBE_EXTRAPOLATE: u8 = 2;
 /// The bits a Subscribe's `kinds` may have.
 pub(crate) const KIND_BITS: u8 = Kinds::ALL.0;
 
@@ -395,7 +396,13 @@ fn write_session(session: &Session, out: &mut Vec<u8>) -> Result<(), WireError> 
 /// A Subscribe payload, also the tail of a Session's; already checked.
 fn write_options(options: &Subscribe, out: &mut Vec<u8>) {
     out.push(options.encoding.byte());
-    out.push(if options.resend { SUBSCRIBE_RESEND } else { 0 });
+    let resend = if options.resend { SUBSCRIBE_RESEND } else { 0 };
+    let extrapolate = if options.extrapolate {
+        SUBSCRIBE_EXTRAPOLATE
+    } else {
+        0
+    };
+    out.push(resend | extrapolate);
     out.extend_from_slice(&options.max_rate_hz.to_le_bytes());
     out.push(options.kinds.bits());
     // At most MAX_SUBSCRIBE_IDS, checked.

@@ -30,7 +30,8 @@ pub use encode::encode;
 pub use error::WireError;
 pub use message::{
     check_hello, quantisation_bound_m, Encoding, Kinds, Message, Pose, Sender, Session, Shape,
-    SimplifyStats, StageLatency, Stats, Subscribe, FIRST_SUPPORT_ID, MAX_FRAME_BYTES,
+    SimplifyStats, StageLatency, Stats, Subscribe, EXTRAPOLATION_REFRESH,
+    EXTRAPOLATION_TOLERANCE_M, EXTRAPOLATION_TOLERANCE_RAD, FIRST_SUPPORT_ID, MAX_FRAME_BYTES,
     MAX_NAME_BYTES, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, PROTOCOL_VERSION, SHAPE_CLOSED,
     SHAPE_SUPPORT,
 };

@@ -237,6 +237,11 @@ pub struct Subscribe {
     /// Send a fresh snapshot (Session, a Shape of every object, SnapshotDone) under the new
     /// options.
     pub resend: bool,
+    /// The client extrapolates each pose by its velocity ([`Pose::extrapolated`]): the server
+    /// sends a Pose only when that extrapolation would be off by more than
+    /// [`EXTRAPOLATION_TOLERANCE_M`] or [`EXTRAPOLATION_TOLERANCE_RAD`], or when the object's
+    /// last Pose to the client is [`EXTRAPOLATION_REFRESH`] old (dead reckoning).
+    pub extrapolate: bool,
     /// At most this many Shapes and Poses a second per object (the latest is sent when the
     /// interval is over); 0 for no cap. Finite and not negative.
     pub max_rate_hz: f32,
@@ -286,7 +291,49 @@ impl Pose {
     pub fn world_from_object(&self) -> glam::Affine3A {
         glam::Affine3A::from_rotation_translation(self.rotation, self.translation)
     }
+
+    /// `world_from_object` at `time_ns` (`CLOCK_MONOTONIC`), extrapolated from the pose time by
+    /// the velocities: the translation moves by `linear_velocity · Δt`, the rotation turns by
+    /// `angular_velocity · Δt` (about the world axis, before the pose's own rotation).
+    pub fn extrapolated(&self, time_ns: u64) -> glam::Affine3A {
+        let (rotation, translation) = self.extrapolated_parts(time_ns);
+        glam::Affine3A::from_rotation_translation(rotation, translation)
+    }
+
+    /// The rotation and translation of [`Pose::extrapolated`].
+    pub fn extrapolated_parts(&self, time_ns: u64) -> (glam::Quat, glam::Vec3) {
+        let dt = (time_ns as f64 - self.pose_time_ns as f64) as f32 * 1e-9;
+        let turn = glam::Quat::from_scaled_axis(self.angular_velocity * dt);
+        (
+            (turn * self.rotation).normalize(),
+            self.translation + self.linear_velocity * dt,
+        )
+    }
+
+    /// Whether `newer` (of the same object) must be sent to a client that extrapolates this
+    /// pose: its extrapolation to `newer`'s time is off by more than the tolerances, or it is
+    /// [`EXTRAPOLATION_REFRESH`] old.
+    pub fn extrapolation_misses(&self, newer: &Pose) -> bool {
+        if newer.shape_version != self.shape_version
+            || newer.last_seen_ns.saturating_sub(self.last_seen_ns)
+                >= EXTRAPOLATION_REFRESH.as_nanos() as u64
+        {
+            return true;
+        }
+        let (rotation, translation) = self.extrapolated_parts(newer.pose_time_ns);
+        translation.distance(newer.translation) > EXTRAPOLATION_TOLERANCE_M
+            || rotation.angle_between(newer.rotation) > EXTRAPOLATION_TOLERANCE_RAD
+    }
 }
+
+/// How far a client's extrapolated pose may be from the daemon's estimate before the daemon
+/// sends it a Pose ([`Subscribe::extrapolate`]): 2 mm…
+pub const EXTRAPOLATION_TOLERANCE_M: f32 = 0.002;
+/// …and 1°.
+pub const EXTRAPOLATION_TOLERANCE_RAD: f32 = std::f32::consts::PI / 180.0;
+/// An extrapolating client gets a Pose of each object at least this often while the object is
+/// seen, so that its last-seen time advances.
+pub const EXTRAPOLATION_REFRESH: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// A shape flag: the mesh is closed (every edge shared by two triangles), wound
 /// counter-clockwise seen from outside.

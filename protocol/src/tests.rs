@@ -272,6 +272,7 @@ fn sample_subscribe() -> Subscribe {
     Subscribe {
         encoding: Encoding::Compact,
         resend: true,
+        extrapolate: false,
         max_rate_hz: 10.0,
         kinds: Kinds::ALL,
         object_ids: Vec::new(),
@@ -361,6 +362,7 @@ fn client_messages() -> Vec<Message> {
         Message::Subscribe(Subscribe {
             encoding: Encoding::Full,
             resend: false,
+            extrapolate: true,
             max_rate_hz: 0.5,
             kinds: Kinds::OBJECTS,
             object_ids: (1..=MAX_SUBSCRIBE_IDS as u64).collect(),
@@ -1118,7 +1120,7 @@ fn wire_rejects_undefined_flags() {
 
     let subscribe = encoded(&Message::Subscribe(sample_subscribe()));
     let err = decode_err(
-        &patched(&subscribe, at::SUBSCRIBE_FLAGS, &[0x03]),
+        &patched(&subscribe, at::SUBSCRIBE_FLAGS, &[0x05]),
         Sender::Client,
     );
     assert_eq!(
@@ -1126,11 +1128,17 @@ fn wire_rejects_undefined_flags() {
         WireError::InvalidFlags {
             message: "Subscribe",
             field: "flags",
-            value: 0x03,
-            defined: 0x01
+            value: 0x05,
+            defined: 0x03
         }
     );
-    assert!(err.to_string().contains("only the bits 0x01"), "{err}");
+    assert!(err.to_string().contains("only the bits 0x03"), "{err}");
+    // resend and extrapolate together are fine.
+    assert!(decode_one(
+        &patched(&subscribe, at::SUBSCRIBE_FLAGS, &[0x03]),
+        Sender::Client
+    )
+    .is_ok());
     assert!(matches!(
         decode_err(&patched(&subscribe, at::KINDS, &[0x07]), Sender::Client),
         WireError::InvalidFlags { field: "kinds", .. }
@@ -1745,4 +1753,50 @@ fn mangle(bytes: &mut Vec<u8>, rng: &mut Lcg) {
             bytes[at..end].copy_from_slice(&value.to_le_bytes()[..end - at]);
         }
     }
+}
+
+/// A pose extrapolated by its velocities: the translation along the linear velocity, the
+/// rotation about the angular velocity's axis; a newer pose on that path needs no sending, one
+/// off it by more than the tolerance does, and so does one a second newer.
+#[test]
+fn a_pose_extrapolates_by_its_velocity_and_says_when_a_newer_one_must_go() {
+    let pose = Pose {
+        object_id: 3,
+        shape_version: 2,
+        pose_time_ns: 1_000_000_000,
+        pose_time_realtime_ns: 0,
+        last_seen_ns: 1_000_000_000,
+        rotation: Quat::IDENTITY,
+        translation: Vec3::new(1.0, 0.0, 0.0),
+        linear_velocity: Vec3::new(0.1, 0.0, 0.0),
+        angular_velocity: Vec3::new(0.0, 0.0, 0.5),
+    };
+    let (rotation, translation) = pose.extrapolated_parts(1_500_000_000);
+    assert!(translation.distance(Vec3::new(1.05, 0.0, 0.0)) < 1e-6);
+    assert!((rotation.angle_between(Quat::from_rotation_z(0.25))).abs() < 1e-5);
+    let on_path = |ms: u64, off_m: f32| Pose {
+        pose_time_ns: 1_000_000_000 + ms * 1_000_000,
+        last_seen_ns: 1_000_000_000 + ms * 1_000_000,
+        rotation: pose.extrapolated_parts(1_000_000_000 + ms * 1_000_000).0,
+        translation: pose.extrapolated_parts(1_000_000_000 + ms * 1_000_000).1
+            + Vec3::new(0.0, off_m, 0.0),
+        ..pose
+    };
+    assert!(!pose.extrapolation_misses(&on_path(500, 0.0)));
+    assert!(!pose.extrapolation_misses(&on_path(500, 0.0019)));
+    assert!(pose.extrapolation_misses(&on_path(500, 0.0021)));
+    assert!(
+        pose.extrapolation_misses(&on_path(1000, 0.0)),
+        "a second old"
+    );
+    let turned = Pose {
+        rotation: Quat::from_rotation_x(0.02) * on_path(100, 0.0).rotation,
+        ..on_path(100, 0.0)
+    };
+    assert!(pose.extrapolation_misses(&turned), "turned 1.1° off");
+    let reshaped = Pose {
+        shape_version: 3,
+        ..on_path(100, 0.0)
+    };
+    assert!(pose.extrapolation_misses(&reshaped));
 }

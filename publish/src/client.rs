@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{
-    encode, FrameDecoder, Kinds, Message, Sender, Session, Subscribe, FIRST_SUPPORT_ID,
+    encode, FrameDecoder, Kinds, Message, Pose, Sender, Session, Subscribe, FIRST_SUPPORT_ID,
 };
 
 use tacmesh_source::{monotonic_now, realtime_now_ns};
@@ -33,6 +33,8 @@ const SNAPSHOT_DONE: [u8; 5] = [1, 0, 0, 0, 4];
 /// An object's shape, encoded both ways (a subscriber asks for one), and its version.
 pub struct EncodedShape {
     pub version: u64,
+    /// The pose inside it.
+    pub pose: Pose,
     /// The Shape frame in [`Encoding::Full`](tacmesh_protocol::Encoding::Full).
     pub full: Vec<u8>,
     /// The Shape frame in [`Encoding::Compact`](tacmesh_protocol::Encoding::Compact).
@@ -49,11 +51,17 @@ impl EncodedShape {
     }
 }
 
+/// A Pose frame and the pose it carries.
+pub struct EncodedPose {
+    pub pose: Pose,
+    pub bytes: Vec<u8>,
+}
+
 /// What is current of one object: its shape, and a pose newer than the one inside the shape.
 #[derive(Clone, Default)]
 pub(crate) struct ObjectFrames {
     pub(crate) shape: Option<Arc<EncodedShape>>,
-    pub(crate) pose: Option<Arc<Vec<u8>>>,
+    pub(crate) pose: Option<Arc<EncodedPose>>,
 }
 
 impl ObjectFrames {
@@ -172,7 +180,7 @@ impl Client {
     }
 
     /// A new pose of an object (it replaces an unsent pose, and goes after an unsent shape).
-    pub(crate) fn queue_pose(&self, object_id: u64, frame: &Arc<Vec<u8>>) {
+    pub(crate) fn queue_pose(&self, object_id: u64, frame: &Arc<EncodedPose>) {
         let mut pending = lock(&self.pending);
         if !passes(&pending.options, object_id) {
             return;
@@ -300,17 +308,32 @@ enum Next {
     Closed,
 }
 
-/// When each object was last written to this subscriber, for its rate cap.
-type LastSent = std::collections::HashMap<u64, Instant>;
+/// What the writer knows of what it wrote to its subscriber, per object: when it last wrote
+/// an update of it (for the rate cap) and the last pose it told (for extrapolating clients).
+#[derive(Default)]
+struct Written {
+    at: std::collections::HashMap<u64, Instant>,
+    pose: std::collections::HashMap<u64, Pose>,
+}
 
 /// Takes what may be written now: everything, except the shapes and poses of objects written
-/// less than 1/`max_rate_hz` ago (a snapshot takes everything). Returns the batch and when
-/// the earliest held-back object may go.
-fn take_due(
-    pending: &mut Pending,
-    last_sent: &LastSent,
-    now: Instant,
-) -> (Updates, Option<Instant>) {
+/// less than 1/`max_rate_hz` ago (a snapshot takes everything). For a client that
+/// extrapolates poses, a Pose its extrapolation already matches is dropped, not sent. Returns
+/// the batch and when the earliest held-back object may go.
+fn take_due(pending: &mut Pending, written: &Written, now: Instant) -> (Updates, Option<Instant>) {
+    if pending.options.extrapolate && !pending.updates.snapshot {
+        pending.updates.objects.retain(|id, frames| {
+            if let (None, Some(pose), Some(told)) =
+                (&frames.shape, &frames.pose, written.pose.get(id))
+            {
+                if !told.extrapolation_misses(&pose.pose) {
+                    frames.pose = None;
+                }
+            }
+            !frames.is_empty()
+        });
+    }
+    let last_sent = &written.at;
     let rate = pending.options.max_rate_hz;
     if pending.updates.snapshot || rate <= 0.0 {
         return (std::mem::take(&mut pending.updates), None);
@@ -373,7 +396,7 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
         Ok(())
     };
     send(&shared.hello)?;
-    let mut last_sent = LastSent::new();
+    let mut written = Written::default();
     loop {
         let next = {
             let mut pending = lock(&client.pending);
@@ -389,7 +412,7 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
                     break Next::Goodbye(goodbye, batch);
                 }
                 let now = Instant::now();
-                let (updates, next_due) = take_due(&mut pending, &last_sent, now);
+                let (updates, next_due) = take_due(&mut pending, &written, now);
                 if !updates.is_empty() {
                     break Next::Updates(Batch {
                         updates,
@@ -420,13 +443,13 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
                 client
                     .stream
                     .set_write_timeout(Some(GOODBYE_WRITE_TIMEOUT))?;
-                send_batch(&send, shared, client, &batch, &mut last_sent)?;
+                send_batch(&send, shared, client, &batch, &mut written)?;
                 send(&frame)?;
                 let _ = client.stream.shutdown(Shutdown::Both);
                 return Ok(());
             }
             Next::Updates(batch) => {
-                send_batch(&send, shared, client, &batch, &mut last_sent)?;
+                send_batch(&send, shared, client, &batch, &mut written)?;
             }
         }
     }
@@ -439,7 +462,7 @@ fn send_batch(
     shared: &Shared,
     client: &Client,
     batch: &Batch,
-    last_sent: &mut LastSent,
+    written: &mut Written,
 ) -> std::io::Result<()> {
     let Batch { updates, options } = batch;
     let mut bytes = Vec::new();
@@ -457,6 +480,7 @@ fn send_batch(
     for (&object_id, frames) in &updates.objects {
         if let Some(shape) = &frames.shape {
             send(shape.bytes(options.encoding))?;
+            written.pose.insert(object_id, shape.pose);
             shared.shapes_published.fetch_add(1, Ordering::Relaxed);
             tracing::trace!(
                 client = client.id,
@@ -466,11 +490,12 @@ fn send_batch(
             );
         }
         if let Some(pose) = &frames.pose {
-            send(pose)?;
+            send(&pose.bytes)?;
+            written.pose.insert(object_id, pose.pose);
             shared.poses_published.fetch_add(1, Ordering::Relaxed);
         }
         if !frames.is_empty() {
-            last_sent.insert(object_id, now);
+            written.at.insert(object_id, now);
         }
     }
     if updates.snapshot {
@@ -480,7 +505,8 @@ fn send_batch(
         bytes.clear();
         encode(&Message::Remove { object_id }, &mut bytes).map_err(to_io)?;
         send(&bytes)?;
-        last_sent.remove(&object_id);
+        written.at.remove(&object_id);
+        written.pose.remove(&object_id);
     }
     if let Some(stats) = &updates.stats {
         send(stats)?;

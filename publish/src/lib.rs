@@ -39,8 +39,8 @@ use tacmesh_protocol::{
     encode, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
 };
 
-pub use crate::client::EncodedShape;
 use crate::client::{Client, ObjectFrames, Retire};
+pub use crate::client::{EncodedPose, EncodedShape};
 
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
@@ -73,7 +73,7 @@ pub trait Mirror: Send + Sync {
     /// A new shape of an object, with the pose it comes with.
     fn shape(&self, object_id: u64, shape: &Arc<EncodedShape>);
     /// A new pose of an object's published shape (a Pose frame).
-    fn pose(&self, object_id: u64, frame: &Arc<Vec<u8>>);
+    fn pose(&self, object_id: u64, pose: &Arc<EncodedPose>);
     /// The object is gone.
     fn remove(&self, object_id: u64);
     /// The latest Stats frame.
@@ -415,6 +415,7 @@ impl Publisher {
         };
         let frames = Arc::new(EncodedShape {
             version,
+            pose: shape.pose,
             full: encode_as(Encoding::Full)?,
             compact: encode_as(Encoding::Compact)?,
         });
@@ -457,7 +458,7 @@ impl Publisher {
         let mut bytes = Vec::new();
         encode(&Message::Pose(pose), &mut bytes)
             .map_err(|cause| PublishError::EncodePose { object_id, cause })?;
-        let frame = Arc::new(bytes);
+        let frame = Arc::new(EncodedPose { pose, bytes });
         let mut state = lock(&self.shared.state);
         let current = state
             .objects

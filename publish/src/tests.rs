@@ -872,3 +872,62 @@ fn a_version_1_subscribe_gets_a_goodbye_naming_version_2() {
     publisher.shape(shape(1, 1, 3)).unwrap();
     assert_eq!(other.shape().object_id(), 1);
 }
+
+/// A client that extrapolates poses by their velocity is sent a Pose only when its
+/// extrapolation of the last one it got would be off by more than 2 mm or 1°, or once a second
+/// (by last seen).
+#[test]
+fn an_extrapolating_client_gets_only_the_poses_its_extrapolation_misses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, publisher, mut client) = serving_one_client(&dir);
+    client.send(Message::Subscribe(Subscribe {
+        extrapolate: true,
+        resend: true,
+        ..Subscribe::default()
+    }));
+    assert_eq!(client.snapshot(), vec![]);
+    // Sliding at 0.1 m/s along x from 1 s on.
+    let sliding = |ms: u64, off_m: f32| {
+        let time = 1_000_000_000 + ms * 1_000_000;
+        Pose {
+            pose_time_ns: time,
+            pose_time_realtime_ns: time,
+            last_seen_ns: time,
+            translation: Vec3::new(ms as f32 * 1e-4, off_m, 1.0),
+            linear_velocity: Vec3::new(0.1, 0.0, 0.0),
+            ..pose(1, 1, 0)
+        }
+    };
+    let mut first = shape(1, 1, 3);
+    first.pose = sliding(0, 0.0);
+    publisher.shape(first).unwrap();
+    assert_eq!(client.shape().version(), 1);
+    // A frame every 33 ms along the path for 0.9 s, each waited for by the writer.
+    for k in 1..=27u64 {
+        publisher.pose(sliding(k * 33, 0.0)).unwrap();
+        std::thread::sleep(Duration::from_millis(3));
+    }
+    // Then 3 mm off the path: sent. Then along the new path: only when the last one sent is a
+    // second old.
+    publisher.pose(sliding(900, 0.003)).unwrap();
+    assert_eq!(client.expect(), Message::Pose(sliding(900, 0.003)));
+    for ms in [1000, 1500, 1899, 1900] {
+        publisher.pose(sliding(ms, 0.003)).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(20));
+    publisher.stats(Stats::default()).unwrap();
+    let mut after = Vec::new();
+    loop {
+        match client.expect() {
+            Message::Stats(_) => break,
+            other => after.push(other),
+        }
+    }
+    assert_eq!(
+        after,
+        vec![Message::Pose(sliding(1900, 0.003))],
+        "on the extrapolated path: nothing until the last one sent is a second old"
+    );
+    assert_eq!(publisher.counters().poses_published, 2);
+}

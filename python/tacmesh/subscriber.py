@@ -238,6 +238,7 @@ def options_of(
     kinds: Iterable[KindName] | KindName = ("objects", "supports"),
     object_ids: Iterable[int] = (),
     resend: bool = False,
+    extrapolate: bool = False,
 ) -> Subscribe:
     """A :class:`~tacmesh.wire.Subscribe` from friendly values: ``encoding`` ``"full"`` or
     ``"compact"``, ``kinds`` any of ``"objects"``, ``"supports"``."""
@@ -266,6 +267,7 @@ def options_of(
         max_rate_hz=float(max_rate_hz),
         kinds=bits,
         object_ids=tuple(int(i) for i in object_ids),
+        extrapolate=extrapolate,
     )
 
 
@@ -276,7 +278,8 @@ class Subscriber:
     version raises :class:`VersionMismatch` (naming both versions), a Goodbye instead of it
     raises :class:`Refused` with the daemon's reason. Then the client sends a Subscribe with its
     options (``encoding`` ``"full"`` or ``"compact"``, ``max_rate_hz``, ``kinds``,
-    ``object_ids``), with ``resend`` when they differ from the defaults: the daemon's first
+    ``object_ids``, ``extrapolate``: this client extrapolates poses by their velocity, see
+    :meth:`~tacmesh.wire.Pose.extrapolated`), with ``resend`` when they differ from the defaults: the daemon's first
     snapshot (under the defaults) is then not yielded, and the scene is taken from the Session
     that answers the Subscribe. More generally, messages sent under options this client has
     since replaced (up to the Session of the new options) are skipped, Stats excepted, as are
@@ -304,6 +307,7 @@ class Subscriber:
         max_rate_hz: float = 0.0,
         kinds: Iterable[KindName] | KindName = ("objects", "supports"),
         object_ids: Iterable[int] = (),
+        extrapolate: bool = False,
         reconnect: bool = True,
         timeout_s: float | None = None,
         backoff_s: float = 0.1,
@@ -313,7 +317,11 @@ class Subscriber:
         self.path = Path(path)
         #: The options asked for (``resend`` False: it is set on each Subscribe as needed).
         self.options = options_of(
-            encoding=encoding, max_rate_hz=max_rate_hz, kinds=kinds, object_ids=object_ids
+            encoding=encoding,
+            max_rate_hz=max_rate_hz,
+            kinds=kinds,
+            object_ids=object_ids,
+            extrapolate=extrapolate,
         )
         if not send_subscribe and not self.options.same_options(DEFAULT_OPTIONS):
             raise ValueError("options other than the defaults need send_subscribe")
@@ -353,6 +361,7 @@ class Subscriber:
         max_rate_hz: float | None = None,
         kinds: Iterable[KindName] | KindName | None = None,
         object_ids: Iterable[int] | None = None,
+        extrapolate: bool | None = None,
         resend: bool = True,
     ) -> None:
         """Changes the options (those given; the others stay) and sends them. With ``resend``
@@ -364,6 +373,7 @@ class Subscriber:
             max_rate_hz=old.max_rate_hz if max_rate_hz is None else max_rate_hz,
             kinds=old.kinds if kinds is None else kinds,
             object_ids=old.object_ids if object_ids is None else object_ids,
+            extrapolate=old.extrapolate if extrapolate is None else extrapolate,
         )
         if not resend:
             self.scene.keep_only(self.options)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import enum
 import math
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal, Union
 
 import numpy as np
@@ -68,6 +68,7 @@ SHAPE_CLOSED = 0x01
 SHAPE_SUPPORT = 0x02
 #: Subscribe flags.
 SUBSCRIBE_RESEND = 0x01
+SUBSCRIBE_EXTRAPOLATE = 0x02
 
 #: Fixed sizes, bytes of payload.
 POSE_BYTES = 92
@@ -211,6 +212,9 @@ class Subscribe:
     kinds: Kinds = Kinds.ALL
     #: Only these objects (of the kinds asked for); empty for all. At most 1,024.
     object_ids: tuple[int, ...] = ()
+    #: The client extrapolates each pose by its velocity (:meth:`Pose.extrapolated`): the daemon
+    #: sends a Pose only when that would be off by more than 2 mm or 1°, or once a second.
+    extrapolate: bool = False
 
     def admits(self, object_id: int) -> bool:
         """Whether an object of this id passes the filter (its kind, and the ids if any)."""
@@ -224,6 +228,7 @@ class Subscribe:
         a set, the rate as the f32 on the wire)."""
         return (
             self.encoding == other.encoding
+            and self.extrapolate == other.extrapolate
             and _f32(self.max_rate_hz) == _f32(other.max_rate_hz)
             and self.kinds == other.kinds
             and set(self.object_ids) == set(other.object_ids)
@@ -299,6 +304,34 @@ class Pose:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         world = p @ self.rotation_matrix().T + np.asarray(self.translation, dtype=np.float64)
         return world.astype(np.float32)
+
+    def extrapolated(self, time_ns: int) -> Pose:
+        """This pose carried to ``time_ns`` (``CLOCK_MONOTONIC``) by its velocities: the
+        translation along ``linear_velocity``, the rotation turned by ``angular_velocity``
+        (about the world axis) over the time since ``pose_time_ns`` (dead reckoning). The times
+        are kept as they are."""
+        dt = (time_ns - self.pose_time_ns) * 1e-9
+        omega = np.asarray(self.angular_velocity, dtype=np.float64) * dt
+        angle = float(np.linalg.norm(omega))
+        turn = (0.0, 0.0, 0.0, 1.0)
+        if angle > 0.0:
+            axis = omega / angle
+            half = 0.5 * angle
+            turn = (*(axis * np.sin(half)).tolist(), float(np.cos(half)))
+        tx, ty, tz, tw = turn
+        qx, qy, qz, qw = self.rotation
+        rotation = (
+            tw * qx + tx * qw + ty * qz - tz * qy,
+            tw * qy - tx * qz + ty * qw + tz * qx,
+            tw * qz + tx * qy - ty * qx + tz * qw,
+            tw * qw - tx * qx - ty * qy - tz * qz,
+        )
+        moved = np.asarray(self.translation) + np.asarray(self.linear_velocity) * dt
+        return replace(
+            self,
+            rotation=rotation,
+            translation=(float(moved[0]), float(moved[1]), float(moved[2])),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -647,10 +680,10 @@ def _read_options(r: _Reader) -> Subscribe:
             "(0 full, 1 compact)"
         )
     flags = r.u8("flags")
-    if flags & ~SUBSCRIBE_RESEND:
+    defined = SUBSCRIBE_RESEND | SUBSCRIBE_EXTRAPOLATE
+    if flags & ~defined:
         raise InvalidFlags(
-            f"`flags` of {r.what} is 0x{flags:02x}, but only the bits "
-            f"0x{SUBSCRIBE_RESEND:02x} are defined"
+            f"`flags` of {r.what} is 0x{flags:02x}, but only the bits 0x{defined:02x} are defined"
         )
     max_rate_hz = r.number("max_rate_hz")
     kinds = r.u8("kinds")
@@ -672,6 +705,7 @@ def _read_options(r: _Reader) -> Subscribe:
     return Subscribe(
         encoding=Encoding(encoding),
         resend=bool(flags & SUBSCRIBE_RESEND),
+        extrapolate=bool(flags & SUBSCRIBE_EXTRAPOLATE),
         max_rate_hz=max_rate_hz,
         kinds=Kinds(kinds),
         object_ids=tuple(ids),
@@ -949,7 +983,8 @@ def _options_payload(options: Subscribe, what: str, validate: bool) -> bytes:
     return struct.pack(
         f"<BBfBI{len(options.object_ids)}Q",
         int(options.encoding),
-        SUBSCRIBE_RESEND if options.resend else 0,
+        (SUBSCRIBE_RESEND if options.resend else 0)
+        | (SUBSCRIBE_EXTRAPOLATE if options.extrapolate else 0),
         options.max_rate_hz,
         int(options.kinds),
         len(options.object_ids),

@@ -323,7 +323,7 @@ def test_server_messages_round_trip(message: AnyMessage) -> None:
     "message",
     [
         DEFAULT_OPTIONS,
-        Subscribe(Encoding.COMPACT, True, 10.0, Kinds.OBJECTS, tuple(range(1, 1025))),
+        Subscribe(Encoding.COMPACT, True, 10.0, Kinds.OBJECTS, tuple(range(1, 1025)), True),
         SubscribeV1(),
     ],
     ids=["default", "everything", "v1"],
@@ -554,7 +554,7 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         patched(encode(Session(0, 0)), 5 + 16, b"\x02"),
         InvalidEnum,
     ),
-    ("a Session flag not defined", patched(encode(Session(0, 0)), 5 + 17, b"\x02"), InvalidFlags),
+    ("a Session flag not defined", patched(encode(Session(0, 0)), 5 + 17, b"\x04"), InvalidFlags),
     ("a Session of no kinds", patched(encode(Session(0, 0)), 5 + 22, b"\x00"), InvalidFlags),
     ("a Session kind not defined", patched(encode(Session(0, 0)), 5 + 22, b"\x07"), InvalidFlags),
     (
@@ -650,7 +650,7 @@ CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         CountOverCap,
     ),
     ("an encoding not defined", patched(encode(DEFAULT_OPTIONS), 5, b"\x02"), InvalidEnum),
-    ("a flag not defined", patched(encode(DEFAULT_OPTIONS), 6, b"\x03"), InvalidFlags),
+    ("a flag not defined", patched(encode(DEFAULT_OPTIONS), 6, b"\x05"), InvalidFlags),
     ("no kinds", unchecked(Subscribe(kinds=Kinds(0))), InvalidFlags),
     ("a NaN rate", unchecked(Subscribe(max_rate_hz=NAN)), InvalidNumber),
 ]
@@ -833,3 +833,22 @@ def test_the_world_mesh_follows_the_pose() -> None:
     np.testing.assert_array_equal(mesh.triangles, shape.triangles)
     # The object frame's vertices stay as sent.
     np.testing.assert_array_equal(scene.objects[1].vertices, shape.vertices)
+
+
+def test_a_pose_extrapolates_by_its_velocities() -> None:
+    pose = Pose(
+        object_id=3,
+        shape_version=2,
+        pose_time_ns=1_000_000_000,
+        pose_time_realtime_ns=0,
+        last_seen_ns=1_000_000_000,
+        rotation=(0.0, 0.0, 0.0, 1.0),
+        translation=(1.0, 0.0, 0.0),
+        linear_velocity=(0.1, 0.0, 0.0),
+        angular_velocity=(0.0, 0.0, 0.5),
+    )
+    later = pose.extrapolated(1_500_000_000)
+    assert np.allclose(later.translation, (1.05, 0.0, 0.0))
+    # A quarter radian about z: (0, 0, sin 0.125, cos 0.125).
+    assert np.allclose(later.rotation, (0.0, 0.0, np.sin(0.125), np.cos(0.125)))
+    assert pose.extrapolated(1_000_000_000) == pose

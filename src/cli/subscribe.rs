@@ -40,6 +40,11 @@ pub struct SubscribeArgs {
     /// over)
     #[arg(long, value_name = "HZ")]
     max_rate_hz: Option<f32>,
+    /// Ask for a Pose only when extrapolating the last one by its velocity would be off by more
+    /// than 2 mm or 1° (or once a second): fewer poses for a client that extrapolates; the
+    /// printed poses are what was sent
+    #[arg(long)]
+    extrapolate: bool,
     /// Only objects, or only support planes
     #[arg(long, value_name = "KIND", value_parser = ["objects", "supports"])]
     only: Option<String>,
@@ -49,7 +54,7 @@ pub struct SubscribeArgs {
     /// Read from Zenoh instead of the socket, joining as FILE's [zenoh] section says (the same
     /// section as the daemon's, with `connect` naming the daemon's or a router's endpoint);
     /// needs a build with the `zenoh` feature
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "only", "ids"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "extrapolate", "only", "ids"])]
     zenoh: Option<PathBuf>,
 }
 
@@ -118,6 +123,7 @@ impl SubscribeArgs {
                 Encoding::Full
             },
             resend: true,
+            extrapolate: self.extrapolate,
             max_rate_hz: self.max_rate_hz.unwrap_or(0.0),
             kinds: match self.only.as_deref() {
                 Some("objects") => Kinds::OBJECTS,

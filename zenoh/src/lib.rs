@@ -26,7 +26,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{Encoding, FrameDecoder, Message, Sender, WireError};
-use tacmesh_publish::{EncodedShape, Mirror};
+use tacmesh_publish::{EncodedPose, EncodedShape, Mirror};
 use zenoh::qos::CongestionControl;
 use zenoh::query::ConsolidationMode;
 use zenoh::Wait;
@@ -218,7 +218,7 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
 #[derive(Default)]
 struct Pending {
     shapes: BTreeMap<u64, Arc<EncodedShape>>,
-    poses: BTreeMap<u64, Arc<Vec<u8>>>,
+    poses: BTreeMap<u64, Arc<EncodedPose>>,
     removes: BTreeSet<u64>,
     stats: Option<Arc<Vec<u8>>>,
     stopping: bool,
@@ -234,7 +234,7 @@ impl Pending {
 }
 
 /// An object's current shape and the pose newer than the one inside it, if any.
-type ShapeAndPose = (Arc<EncodedShape>, Option<Arc<Vec<u8>>>);
+type ShapeAndPose = (Arc<EncodedShape>, Option<Arc<EncodedPose>>);
 
 /// The current shape and newer pose of every object, for the scene's queryable.
 type Current = BTreeMap<u64, ShapeAndPose>;
@@ -335,13 +335,13 @@ impl Mirror for ZenohMirror {
         self.shared.wake.notify_one();
     }
 
-    fn pose(&self, object_id: u64, frame: &Arc<Vec<u8>>) {
+    fn pose(&self, object_id: u64, pose: &Arc<EncodedPose>) {
         if let Some(entry) = lock(&self.shared.current).get_mut(&object_id) {
-            entry.1 = Some(Arc::clone(frame));
+            entry.1 = Some(Arc::clone(pose));
         }
         lock(&self.shared.pending)
             .poses
-            .insert(object_id, Arc::clone(frame));
+            .insert(object_id, Arc::clone(pose));
         self.shared.wake.notify_one();
     }
 
@@ -413,7 +413,7 @@ impl Shared {
             self.put(session, keys.shape(id), shape.bytes(self.encoding), true);
         }
         for (&id, pose) in &batch.poses {
-            self.put(session, keys.pose(id), pose, false);
+            self.put(session, keys.pose(id), &pose.bytes, false);
         }
         let mut remove = Vec::new();
         for &id in &batch.removes {
@@ -465,7 +465,7 @@ impl Shared {
         for (id, (shape, pose)) in current {
             let mut replies = vec![(self.keys.shape(id), shape.bytes(self.encoding).to_vec())];
             if let Some(pose) = pose {
-                replies.push((self.keys.pose(id), pose.to_vec()));
+                replies.push((self.keys.pose(id), pose.bytes.clone()));
             }
             for (key, frame) in replies {
                 if let Err(error) = query.reply(&key, frame).wait() {
