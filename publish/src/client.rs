@@ -367,15 +367,22 @@ fn write_loop(shared: &Shared, client: &Client) -> Retire {
     match write_all_frames(shared, client) {
         Ok(()) => Retire::Quiet,
         Err(_) if client.is_closed() || client.leaving.load(Ordering::Relaxed) => Retire::Quiet,
-        Err(error) if matches!(error.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {
-            Retire::Dropped(format!(
+        Err(WriteFailure { error, unsent })
+            if matches!(error.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) =>
+        {
+            let why = format!(
                 "it read nothing for {} s",
                 shared.write_timeout.as_secs_f32()
-            ))
+            );
+            if farewell(client, &unsent, &why) {
+                Retire::Dropped(format!("{why} (told so in a Goodbye)"))
+            } else {
+                Retire::Dropped(why)
+            }
         }
         // A subscriber that closed its end: its reader saw the end of its input, and only a
         // write tells a half-closed connection (still reading) from a closed one.
-        Err(error)
+        Err(WriteFailure { error, .. })
             if matches!(
                 error.kind(),
                 ErrorKind::BrokenPipe | ErrorKind::ConnectionReset
@@ -383,16 +390,77 @@ fn write_loop(shared: &Shared, client: &Client) -> Retire {
         {
             Retire::Gone("disconnected".into())
         }
-        Err(error) => Retire::Gone(format!("write failed: {error}")),
+        Err(WriteFailure { error, .. }) => Retire::Gone(format!("write failed: {error}")),
     }
 }
 
-fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
-    let send = |bytes: &[u8]| -> std::io::Result<()> {
-        (&client.stream).write_all(bytes)?;
-        shared
-            .bytes_sent
-            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+/// A write that failed, with what of its frame had not gone out (a write timeout can strike
+/// in the middle of a frame).
+struct WriteFailure {
+    error: std::io::Error,
+    unsent: Vec<u8>,
+}
+
+impl From<std::io::Error> for WriteFailure {
+    fn from(error: std::io::Error) -> Self {
+        Self {
+            error,
+            unsent: Vec::new(),
+        }
+    }
+}
+
+/// Tells a subscriber dropped for not reading why, if the socket can still take it: the
+/// buffer is raised (as at shutdown, up to `net.core.wmem_max`) and the rest of the frame it
+/// stalled in is written first, so that its stream stays whole and ends in a Goodbye it
+/// finds when it reads again. Returns whether the Goodbye was written; bounded by
+/// [`GOODBYE_WRITE_TIMEOUT`].
+fn farewell(client: &Client, unsent: &[u8], why: &str) -> bool {
+    let mut goodbye = Vec::new();
+    let reason = format!("dropped: {why}");
+    if encode(&Message::Goodbye { reason }, &mut goodbye).is_err() {
+        return false;
+    }
+    let _ = rustix::net::sockopt::set_socket_send_buffer_size(
+        &client.stream,
+        SHUTDOWN_SEND_BUFFER_BYTES,
+    );
+    if client
+        .stream
+        .set_write_timeout(Some(GOODBYE_WRITE_TIMEOUT))
+        .is_err()
+    {
+        return false;
+    }
+    let mut stream = &client.stream;
+    stream.write_all(unsent).is_ok() && stream.write_all(&goodbye).is_ok()
+}
+
+fn write_all_frames(shared: &Shared, client: &Client) -> Result<(), WriteFailure> {
+    // By hand rather than `write_all`, to know what of a frame is left when a write fails.
+    let send = |bytes: &[u8]| -> Result<(), WriteFailure> {
+        let mut written = 0;
+        while written < bytes.len() {
+            match (&client.stream).write(&bytes[written..]) {
+                Ok(0) => {
+                    return Err(WriteFailure {
+                        error: ErrorKind::WriteZero.into(),
+                        unsent: bytes[written..].to_vec(),
+                    })
+                }
+                Ok(n) => {
+                    written += n;
+                    shared.bytes_sent.fetch_add(n as u64, Ordering::Relaxed);
+                }
+                Err(error) if error.kind() == ErrorKind::Interrupted => {}
+                Err(error) => {
+                    return Err(WriteFailure {
+                        error,
+                        unsent: bytes[written..].to_vec(),
+                    })
+                }
+            }
+        }
         Ok(())
     };
     send(&shared.hello)?;
@@ -458,15 +526,17 @@ fn write_all_frames(shared: &Shared, client: &Client) -> std::io::Result<()> {
 /// Writes one batch: a Session first if it is a snapshot, the shapes and poses (then
 /// SnapshotDone for a snapshot), the removes and the stats.
 fn send_batch(
-    send: &impl Fn(&[u8]) -> std::io::Result<()>,
+    send: &impl Fn(&[u8]) -> Result<(), WriteFailure>,
     shared: &Shared,
     client: &Client,
     batch: &Batch,
     written: &mut Written,
-) -> std::io::Result<()> {
+) -> Result<(), WriteFailure> {
     let Batch { updates, options } = batch;
     let mut bytes = Vec::new();
-    let to_io = |error: tacmesh_protocol::WireError| std::io::Error::other(error.to_string());
+    let to_io = |error: tacmesh_protocol::WireError| {
+        WriteFailure::from(std::io::Error::other(error.to_string()))
+    };
     if updates.snapshot {
         let session = Session {
             monotonic_ns: monotonic_now().as_nanos() as u64,

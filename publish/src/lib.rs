@@ -16,7 +16,8 @@
 //! subscriber's options (encoding, rate cap per object, which objects) are applied by its
 //! writer. Its socket's kernel buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can
 //! be stale there when it reads again. A subscriber that reads nothing for [`WRITE_TIMEOUT`] is
-//! dropped; one that only closes its sending side goes on being served. A reader thread per
+//! dropped (told why in a Goodbye after the frame it stalled in, when they fit in a raised
+//! buffer); one that only closes its sending side goes on being served. A reader thread per
 //! subscriber decodes what it sends; anything but a well-formed `Subscribe` gets it dropped
 //! with one WARN line (a version-1 Subscribe with a Goodbye saying why first). Blocking std
 //! threads only.

@@ -546,7 +546,7 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     let mut config = PublisherConfig::new(&path);
     config.server_name = "tacmesh-test".into();
     let publisher = Publisher::bind_with_write_timeout(config, write_timeout).unwrap();
-    let _stalled = UnixStream::connect(&path).unwrap(); // never reads
+    let mut stalled = TestClient::connect(&path); // reads only once it was dropped
     let mut reader = TestClient::connect(&path);
     reader.hello();
     reader.snapshot();
@@ -556,7 +556,9 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     // The other client reads all the time (with this short timeout it must).
     let receive =
         std::thread::spawn(move || [reader.shape().object_id(), reader.shape().object_id()]);
-    publisher.shape(shape(1, 1, 200_000)).unwrap(); // far more than a socket buffer
+    // Ten times the stalled client's socket buffer, and small enough that what is left of it
+    // and a Goodbye fit once the buffer is raised.
+    publisher.shape(shape(1, 1, 2_000)).unwrap();
     let started = Instant::now();
     let deadline = started + 2 * write_timeout + WAIT;
     while publisher.counters().clients_dropped == 0 {
@@ -572,6 +574,18 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     publisher.shape(shape(2, 1, 3)).unwrap();
     assert_eq!(receive.join().unwrap(), [1, 2]);
     assert_eq!(publisher.counters().clients_dropped, 1);
+    // The dropped client finds, when it reads again, whole frames ending in a Goodbye that
+    // says why (the frame it stalled in was finished first).
+    stalled.hello();
+    assert_eq!(stalled.snapshot(), vec![]);
+    assert_eq!(stalled.shape().object_id(), 1);
+    match stalled.expect() {
+        Message::Goodbye { reason } => {
+            assert!(reason.starts_with("dropped: it read nothing for 0.3 s"), "{reason}")
+        }
+        other => panic!("expected Goodbye, got {other:?}"),
+    }
+    assert_eq!(stalled.next(), None);
 }
 
 /// A client that closes its sending side (it has nothing to say: the server needs nothing from
