@@ -581,7 +581,10 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     assert_eq!(stalled.shape().object_id(), 1);
     match stalled.expect() {
         Message::Goodbye { reason } => {
-            assert!(reason.starts_with("dropped: it read nothing for 0.3 s"), "{reason}")
+            assert!(
+                reason.starts_with("dropped: it read nothing for 0.3 s"),
+                "{reason}"
+            )
         }
         other => panic!("expected Goodbye, got {other:?}"),
     }

@@ -73,24 +73,20 @@ pub enum ZenohError {
     Closed,
 }
 
-/// The `[zenoh]` section of a config: how to join the Zenoh network and under which name.
+/// How to join the Zenoh network and under which robot name: what the `[zenoh]` section of a
+/// tacmesh config says (each key is documented there, in `src/daemon/config.rs`, and in
+/// `tacmesh.example.toml`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ZenohSettings {
-    /// The robot's name in every key expression (`tacmesh/<robot>/…`).
     pub robot: String,
-    /// `peer` (the default), `client` (only through a router) or `router`.
     pub mode: String,
-    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447`.
     pub listen: Vec<String>,
-    /// Endpoints to connect to (a router, or a peer), e.g. `tcp/192.0.2.10:7447`.
     pub connect: Vec<String>,
-    /// Find peers by UDP multicast on the local network (off by default: an operator names
-    /// the endpoints).
     pub multicast_scouting: bool,
-    /// A Zenoh configuration file (JSON5) to start from: TLS, access control, timeouts
-    /// (docs/operating.md); the settings above are applied on top of it.
+    /// Zenoh's own configuration (JSON5: TLS, access control), which the fields above are
+    /// applied on top of.
     pub config_file: Option<PathBuf>,
-    /// How the daemon encodes the shapes it puts (all Zenoh subscribers get the same).
+    /// How the daemon encodes the shapes it puts (every Zenoh subscriber gets the same).
     pub encoding: Encoding,
 }
 
