@@ -78,9 +78,9 @@ daemon_log() {
   journalctl --no-pager -o cat _SYSTEMD_INVOCATION_ID="$(prop InvocationID)" "$@"
 }
 
-# subscribe USER COUNT: `tacmesh subscribe` as USER (root: directly) for COUNT meshes, at most
+# subscribe USER COUNT: `tacmesh subscribe` as USER (root: directly) for COUNT updates, at most
 # 30 s; sets sub_rc, sub_out (its output, standard error included) and sub_meshes (how many
-# meshes it printed: `upsert object N` and `upsert plane N` lines).
+# updates of objects and planes it printed: `shape …`, `pose …` and `seen …` lines).
 subscribe() {
   local user=$1 count=$2
   local command=(timeout 30 tacmesh subscribe --socket "$socket" --count "$count")
@@ -89,7 +89,7 @@ subscribe() {
   fi
   sub_out="$("${command[@]}" 2>&1)"
   sub_rc=$?
-  sub_meshes="$(grep -c '^upsert ' <<<"$sub_out")"
+  sub_meshes="$(grep -cE '^(shape|pose|seen) ' <<<"$sub_out")"
 }
 
 # first_line TEXT: the first line of TEXT, for details.
@@ -186,7 +186,7 @@ started="$(now)"
 subscribe tm-member 5
 if [ "$sub_rc" = 0 ] && [ "$sub_meshes" -ge 5 ]; then
   pass subscribe-member "tm-member ($(id -gn tm-member)) got $sub_meshes meshes in" \
-    "$(since "$started") s, first: $(grep -m 1 '^upsert ' <<<"$sub_out")"
+    "$(since "$started") s, first: $(grep -m 1 '^shape ' <<<"$sub_out")"
 else
   fail subscribe-member "tm-member: exit $sub_rc, $sub_meshes meshes: $(tail -n 2 <<<"$sub_out" | tr '\n' ';')"
 fi
