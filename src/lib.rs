@@ -18,6 +18,7 @@ pub mod pipeline;
 pub mod subscriber;
 
 pub use tacmesh_formats as formats;
+pub use tacmesh_physics as physics;
 pub use tacmesh_protocol as protocol;
 pub use tacmesh_reconstruct as reconstruct;
 pub use tacmesh_segment as segment;

@@ -1,0 +1,5 @@
+//! What a physics engine needs from a mesh, beyond its distance to the truth: a closed,
+//! outward-facing surface for a solid, a closed collision proxy for a one-view shell, and
+//! convex parts with mass properties for a body that can move.
+
+pub mod orientation;
