@@ -6,6 +6,7 @@
 use std::time::Instant;
 
 use serde::Serialize;
+use tacmesh_physics::orientation::{orient_outward, orientation};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
 use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig,
@@ -87,6 +88,15 @@ pub struct MeshReport {
     pub fit_rms_after: f32,
     pub fit_max_move: f32,
     pub fit_ms: f64,
+    /// Connected pieces of the output, those with a boundary (open shells or holes), and
+    /// those the orientation check turned outward (see [`orient_outward`]).
+    pub pieces: usize,
+    pub open_pieces: usize,
+    pub pieces_flipped: usize,
+    /// Whether the output is closed and consistently wound, and its signed volume, m³
+    /// (positive: closed outputs always face out).
+    pub closed: bool,
+    pub volume_m3: f64,
     pub total_ms: f64,
 }
 
@@ -264,9 +274,16 @@ pub fn mesh_cloud_with_dense(
         ..ReconstructConfig::with_voxel_size(voxel_size_m)
     };
     // Reconstruction skips non-finite points itself (and counts the rest).
-    let (dense, grid, recon) = reconstruct_surface(cloud, &recon_config)
+    let (mut dense, grid, recon) = reconstruct_surface(cloud, &recon_config)
         .map_err(|err| explain(err, &cloud.points, extent_m, voxel_size_m))?;
-    let (mesh, mut report) = simplify_and_fit(&dense, &grid, max_residual_m, config.fit_to_data)?;
+    orient_outward(&mut dense, config.viewpoint);
+    let (mesh, mut report) = simplify_and_fit(
+        &dense,
+        &grid,
+        max_residual_m,
+        config.fit_to_data,
+        config.viewpoint,
+    )?;
     report.points = recon.points;
     report.extent_m = extent_m;
     report.voxel_size_m = voxel_size_m;
@@ -299,7 +316,8 @@ pub fn mesh_fused_grid(
         ..ReconstructConfig::with_voxel_size(grid.voxel_size_m())
     };
     let (dense, recon) = mesh_moment_grid(grid, &recon_config)?;
-    let (mesh, mut report) = simplify_and_fit(&dense, grid, max_residual_m, fit_to_data)?;
+    let (mesh, mut report) =
+        simplify_and_fit(&dense, grid, max_residual_m, fit_to_data, viewpoint)?;
     report.points = grid
         .sorted_cells()
         .into_iter()
@@ -317,12 +335,15 @@ pub fn mesh_fused_grid(
 }
 
 /// Simplifies the marching-cubes mesh `dense` under `max_residual_m`, then (optionally) fits
-/// the result to the voxel centroids of `grid`. Fills the simplify and fit fields of the report.
+/// the result to the voxel centroids of `grid`, and last makes every piece face out (closed
+/// pieces by their volume, open ones towards `viewpoint` when known). Fills the simplify, fit
+/// and orientation fields of the report.
 fn simplify_and_fit(
     dense: &TriMesh,
     grid: &MomentGrid,
     max_residual_m: f32,
     fit_to_data: bool,
+    viewpoint: Option<Vec3>,
 ) -> Result<(TriMesh, MeshReport), PipelineError> {
     let simplify_start = Instant::now();
     let (mut mesh, simplified) = simplify(
@@ -365,7 +386,17 @@ fn simplify_and_fit(
     };
     let fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
 
+    // The guarantee a physics engine needs (a positive volume, or the seen side out), checked
+    // on what is published rather than trusted to the reconstruction's normals.
+    let turned = orient_outward(&mut mesh, viewpoint);
+    let faced = orientation(&mesh);
+
     let report = MeshReport {
+        pieces: turned.pieces,
+        open_pieces: turned.open_pieces,
+        pieces_flipped: turned.pieces_flipped,
+        closed: faced.is_closed(),
+        volume_m3: faced.signed_volume_m3,
         max_residual_bound_m: max_residual_m,
         faces: simplified.faces_out,
         vertices: simplified.vertices_out,

@@ -203,7 +203,7 @@ impl PartialOrd for GraphEdge {
 /// the planes of voxels sharing a face with edge cost `1 − |nᵢ·nⱼ|`, so the sign
 /// travels first across nearly parallel planes and only then around sharp bends; each reached
 /// normal is flipped to agree with its parent. Every connected part starts at its highest
-/// plane, oriented to +z (outward, for a closed surface or one seen from above).
+/// plane, oriented to +z, and is then turned as a whole by [`face_extremes_out`].
 fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
     let slot: FxHashMap<IVec3, u32> = planes
         .iter()
@@ -219,6 +219,7 @@ fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
     });
     let mut reached = vec![false; planes.len()];
     let mut heap = BinaryHeap::new();
+    let mut part = Vec::new();
     for &seed in &order {
         if reached[seed as usize] {
             continue;
@@ -227,16 +228,56 @@ fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
         if planes[seed as usize].normal.z < 0.0 {
             planes[seed as usize].normal = -planes[seed as usize].normal;
         }
+        part.clear();
+        part.push(seed);
         push_edges(&slot, planes, &reached, seed, &mut heap);
         while let Some(GraphEdge { to, from, .. }) = heap.pop() {
             if reached[to as usize] {
                 continue;
             }
             reached[to as usize] = true;
+            part.push(to);
             if planes[to as usize].normal.dot(planes[from as usize].normal) < 0.0 {
                 planes[to as usize].normal = -planes[to as usize].normal;
             }
             push_edges(&slot, planes, &reached, to, &mut heap);
+        }
+        face_extremes_out(planes, &part);
+    }
+}
+
+/// Turns a consistently oriented part as a whole so that its extreme planes face away from it.
+///
+/// The seed's rule (the highest plane faces up) fails where the top is a point or an edge:
+/// at a cone's apex the fitted normal is nearly horizontal, its sign is noise, and the whole
+/// cone came out inside out. Here the planes farthest along each of the six axis directions
+/// vote, each with the cosine between its normal and its direction (a plane on a flat top
+/// votes with weight one, one at an apex or on an edge with little), and the part is flipped
+/// when the vote is negative. For a closed surface every extreme faces out; for a shell seen
+/// from one side the side facing the most extremes wins.
+fn face_extremes_out(planes: &mut [CellPlane], part: &[u32]) {
+    let directions = [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ];
+    let vote: f32 = directions
+        .iter()
+        .filter_map(|&d| {
+            part.iter()
+                .max_by(|&&a, &&b| {
+                    let (pa, pb) = (&planes[a as usize], &planes[b as usize]);
+                    pa.point.dot(d).total_cmp(&pb.point.dot(d))
+                })
+                .map(|&extreme| planes[extreme as usize].normal.dot(d))
+        })
+        .sum();
+    if vote < 0.0 {
+        for &i in part {
+            planes[i as usize].normal = -planes[i as usize].normal;
         }
     }
 }

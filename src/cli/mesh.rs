@@ -165,6 +165,8 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
             recon_faces = report.recon_faces,
             faces = report.faces,
             max_residual_m = report.max_residual,
+            closed = report.closed,
+            volume_m3 = format!("{:.4}", report.volume_m3),
             total_ms = format!("{:.1}", report.total_ms),
             "wrote {}",
             args.output.display()
