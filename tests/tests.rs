@@ -6,7 +6,7 @@ mod cli_errors;
 mod cli_help;
 mod daemon;
 mod offline_pipeline;
-mod orientation;
+mod physics_ready;
 mod protocol;
 mod real_scans;
 mod real_scenes;

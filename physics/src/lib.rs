@@ -3,3 +3,4 @@
 //! convex parts with mass properties for a body that can move.
 
 pub mod orientation;
+pub mod proxy;

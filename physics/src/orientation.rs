@@ -23,15 +23,19 @@ pub struct Orientation {
     pub pieces: usize,
     /// Edges used by one face only (the rims of holes and of open shells).
     pub boundary_edges: usize,
-    /// Edges that two faces use in the same direction (the faces disagree on which side is
-    /// out) or that more than two faces use.
+    /// Edges more faces use in one direction than in the other: the faces disagree on which
+    /// side is out (two faces using an edge the same way), or a rim meets a surface.
     pub inconsistent_edges: usize,
+    /// Edges four or more faces use, as many each way: consistent, but where two sheets of
+    /// the surface touch (a pinched rim of an open shell becomes one when it is closed).
+    pub nonmanifold_edges: usize,
     /// Signed volume, m³: positive when a closed mesh faces out.
     pub signed_volume_m3: f64,
 }
 
 impl Orientation {
-    /// Closed and consistently wound: an engine can take its volume.
+    /// Closed and consistently wound (each edge used as often in one direction as in the
+    /// other: a closed oriented surface, whose volume an engine can take).
     pub fn is_closed(&self) -> bool {
         self.boundary_edges == 0 && self.inconsistent_edges == 0
     }
@@ -146,10 +150,12 @@ fn edge_uses(mesh: &TriMesh) -> HashMap<(u32, u32), [u32; 2]> {
 pub fn orientation(mesh: &TriMesh) -> Orientation {
     let mut boundary_edges = 0;
     let mut inconsistent_edges = 0;
+    let mut nonmanifold_edges = 0;
     for [forward, backward] in edge_uses(mesh).into_values() {
         match (forward, backward) {
             (1, 1) => {}
             (1, 0) | (0, 1) => boundary_edges += 1,
+            (f, b) if f == b => nonmanifold_edges += 1,
             _ => inconsistent_edges += 1,
         }
     }
@@ -157,6 +163,7 @@ pub fn orientation(mesh: &TriMesh) -> Orientation {
         pieces: pieces(mesh).1,
         boundary_edges,
         inconsistent_edges,
+        nonmanifold_edges,
         signed_volume_m3: signed_volume_m3(mesh),
     }
 }
