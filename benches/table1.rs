@@ -1,6 +1,7 @@
 //! The paper's Table 1, re-run: the six shapes sampled with Gaussian noise, meshed with the
-//! default pipeline, judged by mean Hausdorff error over 50,000 samples per side; per-stage
-//! timings; and our simplifier against meshoptimizer on the same marching-cubes meshes.
+//! default pipeline, judged by mean Hausdorff error over 50,000 samples per side and by contact
+//! fidelity (probe balls of 5 to 50 mm, `tacmesh eval --contact`); per-stage timings; and our
+//! simplifier against meshoptimizer on the same marching-cubes meshes.
 //!
 //! `cargo bench --bench table1` (all noise levels, 5 seeds) prints Markdown for BENCHMARKS.md
 //! and writes `target/table1.json`. `-- --seeds 1 --noise-mm 20` for a quick look.
@@ -8,7 +9,10 @@
 use std::time::Instant;
 
 use tacmesh::pipeline::{mesh_cloud, mesh_cloud_with_dense, MeshConfig, MeshReport};
-use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape, PAPER_SAMPLES};
+use tacmesh::sim::{
+    contact_fidelity, mesh_distance, sample_cloud, ContactConfig, ContactErrors, SampleConfig,
+    Shape, PAPER_SAMPLES,
+};
 use tacmesh::simplify::{simplify, SimplifyConfig};
 use tacmesh::TriMesh;
 
@@ -22,6 +26,10 @@ const PAPER_TABLE1: [(Shape, usize, usize, usize, f64); 6] = [
     (Shape::Torus, 1152, 2512, 134, 0.0143),
     (Shape::Sphere, 960, 3948, 116, 0.0111),
 ];
+
+/// The probe radius of the contact columns in the main table: [`ContactConfig`]'s second
+/// default, 10 mm (a fingertip pad).
+const TABLE_PROBE: usize = 1;
 
 struct Options {
     seeds: u64,
@@ -66,7 +74,49 @@ struct Run {
     report: MeshReport,
     mhe: f64,
     hausdorff: f64,
+    /// Contact fidelity with the default probes, one entry per radius.
+    contact: Vec<ContactFigures>,
+    contact_ms: f64,
     single_thread_ms: f64,
+}
+
+/// One probe radius's contact figures, in the units of `tacmesh eval --contact --json`.
+#[derive(Clone, serde::Serialize)]
+struct ContactFigures {
+    probe_radius_mm: f32,
+    probes: usize,
+    missed_by_candidate: usize,
+    extra_in_candidate: usize,
+    first_contact_mm_mean: f64,
+    first_contact_mm_p95: f64,
+    along_approach_mm_mean: f64,
+    normal_deg_p50: f64,
+    normal_deg_p95: f64,
+    penetration_mm_mean: f64,
+    penetration_mm_p95: f64,
+}
+
+impl ContactFigures {
+    fn new(probe_radius_m: f32, e: &ContactErrors) -> Self {
+        Self {
+            probe_radius_mm: probe_radius_m * 1e3,
+            probes: e.probes,
+            missed_by_candidate: e.missed_by_candidate,
+            extra_in_candidate: e.extra_in_candidate,
+            first_contact_mm_mean: e.first_contact_m.mean * 1e3,
+            first_contact_mm_p95: e.first_contact_m.p95 * 1e3,
+            along_approach_mm_mean: e.first_contact_along_approach_m.mean * 1e3,
+            normal_deg_p50: e.normal_deg.p50,
+            normal_deg_p95: e.normal_deg.p95,
+            penetration_mm_mean: e.penetration_m.mean * 1e3,
+            penetration_mm_p95: e.penetration_m.p95 * 1e3,
+        }
+    }
+
+    /// Probes that touched only one of the meshes, percent.
+    fn misses_percent(&self) -> f64 {
+        100.0 * (self.missed_by_candidate + self.extra_in_candidate) as f64 / self.probes as f64
+    }
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -108,6 +158,17 @@ fn measure(
     one_thread.install(|| mesh_cloud(&cloud, &config).expect("pipeline runs"));
     let single_thread_ms = start.elapsed().as_secs_f64() * 1e3;
     let d = mesh_distance(&shape.mesh(), &mesh, PAPER_SAMPLES, seed).expect("meshes compare");
+    let start = Instant::now();
+    let contact = contact_fidelity(
+        &shape.mesh(),
+        &mesh,
+        &ContactConfig {
+            seed,
+            ..ContactConfig::default()
+        },
+    )
+    .expect("meshes are probed");
+    let contact_ms = start.elapsed().as_secs_f64() * 1e3;
     Run {
         shape: shape.name(),
         noise_mm,
@@ -115,6 +176,12 @@ fn measure(
         report,
         mhe: d.mhe_m,
         hausdorff: d.hausdorff_m,
+        contact: contact
+            .per_radius
+            .iter()
+            .map(|r| ContactFigures::new(r.probe_radius_m, &r.errors))
+            .collect(),
+        contact_ms,
         single_thread_ms,
     }
 }
@@ -157,14 +224,15 @@ fn main() {
             for seed in 1..=options.seeds {
                 let run = measure(shape, noise_mm, seed, options.points, &one_thread);
                 eprintln!(
-                    "{:>8} {:>4} mm seed {}: {} -> {} faces, mhe {:.5} m, {:.1} ms",
+                    "{:>8} {:>4} mm seed {}: {} -> {} faces, mhe {:.5} m, {:.1} ms; contact {:.1} ms",
                     run.shape,
                     noise_mm,
                     seed,
                     run.report.recon_faces,
                     run.report.faces,
                     run.mhe,
-                    run.report.total_ms
+                    run.report.total_ms,
+                    run.contact_ms
                 );
                 runs.push(run);
             }
@@ -180,8 +248,8 @@ fn main() {
         "\n### Fidelity at 20 mm noise, median of {} seeds, {} points per cloud\n",
         options.seeds, options.points
     );
-    println!("| shape | N_faces | paper recon | ours recon | paper result | **ours result** | paper MHE (m) | **ours MHE (m)** | beats paper |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("| shape | N_faces | paper recon | ours recon | paper result | **ours result** | paper MHE (m) | **ours MHE (m)** | beats paper | first contact (mm) | normal p95 (°) |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for (shape, n_faces, p_recon, p_faces, p_mhe) in PAPER_TABLE1 {
         let rs = of(shape, 20.0);
         if rs.is_empty() {
@@ -191,10 +259,53 @@ fn main() {
         let recon = median(rs.iter().map(|r| r.report.recon_faces as f64).collect());
         let mhe = median(rs.iter().map(|r| r.mhe).collect());
         let beats = faces <= p_faces as f64 && mhe <= p_mhe;
+        let probe = |f: &dyn Fn(&ContactFigures) -> f64| {
+            median(rs.iter().map(|r| f(&r.contact[TABLE_PROBE])).collect())
+        };
         println!(
-            "| {} | {n_faces} | {p_recon} | {recon:.0} | {p_faces} | **{faces:.0}** | {p_mhe:.5} | **{mhe:.5}** | {} |",
+            "| {} | {n_faces} | {p_recon} | {recon:.0} | {p_faces} | **{faces:.0}** | {p_mhe:.5} | **{mhe:.5}** | {} | {:.2} | {:.1} |",
             shape.name(),
-            if beats { "yes" } else { "NO" }
+            if beats { "yes" } else { "NO" },
+            probe(&|c| c.first_contact_mm_mean),
+            probe(&|c| c.normal_deg_p95),
+        );
+    }
+
+    let radii: Vec<f32> = runs
+        .first()
+        .map(|r| r.contact.iter().map(|c| c.probe_radius_mm).collect())
+        .unwrap_or_default();
+    println!(
+        "\n### Contact fidelity at 20 mm noise, median of {} seeds: first-contact error mean (mm) / normal error p95 (°) / penetration error mean (mm) / misses (%), per probe radius\n",
+        options.seeds
+    );
+    let header: Vec<String> = radii.iter().map(|r| format!("{r} mm probe")).collect();
+    println!("| shape | MHE (mm) | {} |", header.join(" | "));
+    println!("|---|---|{}", "---|".repeat(header.len()));
+    for (shape, ..) in PAPER_TABLE1 {
+        let rs = of(shape, 20.0);
+        if rs.is_empty() {
+            continue;
+        }
+        let cells: Vec<String> = (0..radii.len())
+            .map(|i| {
+                let m = |f: &dyn Fn(&ContactFigures) -> f64| {
+                    median(rs.iter().map(|r| f(&r.contact[i])).collect())
+                };
+                format!(
+                    "{:.2} / {:.1} / {:.2} / {:.1}",
+                    m(&|c| c.first_contact_mm_mean),
+                    m(&|c| c.normal_deg_p95),
+                    m(&|c| c.penetration_mm_mean),
+                    m(&|c| c.misses_percent()),
+                )
+            })
+            .collect();
+        println!(
+            "| {} | {:.2} | {} |",
+            shape.name(),
+            median(rs.iter().map(|r| r.mhe * 1e3).collect()),
+            cells.join(" | ")
         );
     }
 

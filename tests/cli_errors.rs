@@ -59,6 +59,31 @@ fn too_few_points_is_a_clear_error() {
     assert!(stderr.contains("too few"), "{stderr}");
 }
 
+/// Contact settings clap can check are refused by clap, naming the flag; a contact setting
+/// without `--contact` is refused too rather than silently ignored.
+#[test]
+fn bad_contact_settings_are_clap_errors() {
+    for (flag, value) in [
+        ("--probe-radii-mm", "5,-10"),
+        ("--probe-radii-mm", "nan"),
+        ("--probe-radii-mm", "0"),
+        ("--probe-radii-mm", "-5"),
+        ("--push-mm", "NaN"),
+        ("--push-mm", "-1"),
+        ("--probes", "0"),
+        ("--viewpoint", "1,nan,2"),
+        ("--viewpoint", "1,2"),
+    ] {
+        let stderr = stderr_of(&["eval", "cube", "cube", "--contact", flag, value]);
+        assert!(
+            stderr.contains("invalid value") && stderr.contains(flag),
+            "{flag} {value}: {stderr}"
+        );
+    }
+    let stderr = stderr_of(&["eval", "cube", "cube", "--push-mm", "5"]);
+    assert!(stderr.contains("--contact"), "{stderr}");
+}
+
 /// `tacmesh eval … | head -0`: a closed standard output is a clear error and exit 1, not the
 /// panic (exit 101) that `println!` gives on a broken pipe.
 #[test]

@@ -220,3 +220,88 @@ fn millimetre_cloud_is_warned_about_and_scale_makes_it_metres() {
     let mhe = eval["mhe"].as_f64().expect("mhe");
     assert!(mhe <= 0.0143, "torus MHE {mhe} after --scale 0.001");
 }
+
+/// `eval --contact --json` on a meshed cube: the contact object has every radius asked for and
+/// every figure, in plausible bounds (BENCHMARKS.md has the cube at about 1 mm first-contact
+/// error and under 1° median normal error with 20 mm noise), and the MHE fields are unchanged.
+#[test]
+fn eval_contact_reports_every_radius_in_millimetres_and_degrees() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cloud = dir.path().join("cube.ply");
+    let mesh = dir.path().join("cube_mesh.ply");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "cube",
+        "--noise-mm",
+        "20",
+        "--seed",
+        "3",
+        "-o",
+        path_str(&cloud),
+    ]);
+    tacmesh_ok(&["mesh", path_str(&cloud), "-o", path_str(&mesh)]);
+    let plain = tacmesh_json(&["eval", "cube", path_str(&mesh), "--json"]);
+    assert!(plain.get("contact").is_none(), "{plain}");
+    let eval = tacmesh_json(&[
+        "eval",
+        "cube",
+        path_str(&mesh),
+        "--json",
+        "--contact",
+        "--probe-radii-mm",
+        "5,20",
+        "--probes",
+        "1000",
+    ]);
+    assert_eq!(eval["mhe"], plain["mhe"], "--contact leaves the MHE alone");
+    let contact = &eval["contact"];
+    assert_eq!(contact["push_mm"], 10.0, "{contact}");
+    assert_eq!(contact["probe_lines"], 1000, "{contact}");
+    let radii: Vec<f64> = contact["per_radius"]
+        .as_array()
+        .expect("per_radius")
+        .iter()
+        .map(|r| r["probe_radius_mm"].as_f64().expect("probe_radius_mm"))
+        .collect();
+    assert_eq!(radii, [5.0, 20.0], "{contact}");
+    let mut rows: Vec<&serde_json::Value> = contact["per_radius"]
+        .as_array()
+        .expect("per_radius")
+        .iter()
+        .collect();
+    rows.push(&contact["overall"]);
+    for row in rows {
+        let probes = row["probes"].as_u64().expect("probes");
+        assert!(probes > 300, "{row}");
+        let misses = row["missed_by_candidate"].as_u64().expect("missed")
+            + row["extra_in_candidate"].as_u64().expect("extra");
+        assert!(misses * 20 < probes, "fewer than 5 % misses: {row}");
+        let figure = |name: &str, stat: &str| {
+            row[name][stat]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{name}.{stat} in {row}"))
+        };
+        for name in [
+            "first_contact_mm",
+            "first_contact_along_approach_mm",
+            "normal_deg",
+            "penetration_mm",
+        ] {
+            assert!(
+                0.0 <= figure(name, "p50")
+                    && figure(name, "p50") <= figure(name, "p95")
+                    && figure(name, "p95") <= figure(name, "max"),
+                "{name}: {row}"
+            );
+            assert!(figure(name, "mean") <= figure(name, "max"), "{name}: {row}");
+        }
+        assert!(figure("first_contact_mm", "mean") < 4.0, "{row}");
+        assert!(
+            figure("first_contact_mm", "max") <= 50.0 + 1e-3,
+            "capped: {row}"
+        );
+        assert!(figure("normal_deg", "p50") < 3.0, "{row}");
+        assert!(figure("penetration_mm", "mean") < 4.0, "{row}");
+    }
+}

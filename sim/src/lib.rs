@@ -23,11 +23,15 @@
 //! - [`mesh_distance`]: the symmetric sampled surface distance between two meshes
 //!   ([`MeshDistance::mhe_m`] is the paper's MHE; use [`PAPER_SAMPLES`] per side);
 //!   [`point_to_mesh_distances`] gives the exact unsigned distance from points to a surface.
+//! - [`contact_fidelity`]: probe balls moved toward both meshes along the same lines; errors of
+//!   first contact, contact normal and penetration at a push, per probe radius
+//!   ([`ContactConfig`], [`ContactFidelity`]).
 //!
 //! Everything here is deterministic: the same inputs and seed give bit-identical outputs
 //! whatever the thread count (see `sampling.rs` for the one cross-platform caveat, the
 //! Gaussian noise's rare libm calls).
 
+mod contact;
 mod depth_camera;
 mod dynamic_scene;
 mod faults;
@@ -41,6 +45,10 @@ mod shapes;
 use glam::Vec3;
 use tacmesh_source::TriMesh;
 
+pub use contact::{
+    contact_fidelity, ContactConfig, ContactErrors, ContactFidelity, ErrorSummary, RadiusFidelity,
+    DEFAULT_PROBE_LINES, DEFAULT_PROBE_RADII_M, DEFAULT_PUSH_M,
+};
 pub use depth_camera::{
     look_at, DepthCameraConfig, DepthCameraError, DepthNoise, SimulatedDepthCamera,
     DEFAULT_INTRINSICS, DEFAULT_VIEW_DISTANCE_M,
@@ -84,6 +92,24 @@ pub enum SimError {
 
     #[error("samples per side must be at least 1 (the paper uses {paper})", paper = PAPER_SAMPLES)]
     NoSamples,
+
+    #[error("a probe radius must be a finite number of metres > 0, got {radius_m}")]
+    InvalidProbeRadius { radius_m: f32 },
+
+    #[error("no probe radius given: name at least one (the defaults are 5, 10, 20 and 50 mm)")]
+    NoProbeRadii,
+
+    #[error("the number of probe lines must be at least 1 (the default is {default})", default = contact::DEFAULT_PROBE_LINES)]
+    NoProbeLines,
+
+    #[error("contact setting {name} must be a finite number >= 0, got {value}")]
+    InvalidContactSetting { name: &'static str, value: f32 },
+
+    #[error("the viewpoint is not finite ({viewpoint}): give the sensor's position in metres")]
+    NonFiniteViewpoint { viewpoint: Vec3 },
+
+    #[error("no probe of radius {radius_m} m touched either mesh (with a viewpoint, on a surface facing it from its side): is the viewpoint in the meshes' frame and in metres?")]
+    NoContacts { radius_m: f32 },
 
     #[error("in the {role} mesh")]
     InMesh {

@@ -36,7 +36,7 @@ pub struct MeshArgs {
     /// Sensor position "x,y,z" in metres in the cloud's frame, for one-view scans (orients
     /// normals towards it) [default: the file's own (a PCD's VIEWPOINT); without one normals
     /// are oriented by propagation]
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = super::parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
     /// Print one JSON object with face counts, the residual reached, per-stage milliseconds, the
     /// points left out for a NaN or infinite coordinate and the viewpoint used
@@ -48,18 +48,6 @@ pub struct MeshArgs {
     /// support planes, unassigned and invalid points)
     #[arg(long)]
     objects: bool,
-}
-
-fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let parts: Vec<f32> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("expected x,y,z: {e}"))?;
-    match parts.as_slice() {
-        [x, y, z] => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!("expected three numbers x,y,z, got {}", parts.len())),
-    }
 }
 
 fn parse_scale(s: &str) -> Result<f32, String> {

@@ -1,7 +1,8 @@
 //! Subcommands of the `tacmesh` binary. `anyhow` lives here and nowhere in the library.
 //!
 //! - `mesh`: one point cloud to one simplified mesh ([`mesh`]).
-//! - `eval`: mean Hausdorff error of a mesh against ground truth ([`eval`]).
+//! - `eval`: mean Hausdorff error of a mesh against ground truth, and with `--contact` its
+//!   contact fidelity ([`eval`]).
 //! - `sim`: the paper's shapes and noisy samples of them ([`sim`]).
 //! - `run`: the daemon ([`run`]); `subscribe`: a client of it ([`subscribe`]).
 //! - `capture`: a sensor's frames as world-frame point clouds ([`capture`]).
@@ -174,6 +175,22 @@ pub(crate) fn shape_or_mesh_file(name: &str) -> anyhow::Result<TriMesh> {
         );
     }
     tacmesh::formats::read_mesh(path).context("reading the mesh")
+}
+
+/// Parses `x,y,z` (a position in metres) for clap; NaN and infinities are refused.
+pub(crate) fn parse_vec3(s: &str) -> Result<tacmesh::glam::Vec3, String> {
+    let parts: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("expected x,y,z: {e}"))?;
+    match parts.as_slice() {
+        [x, y, z] if [x, y, z].iter().all(|v| v.is_finite()) => {
+            Ok(tacmesh::glam::Vec3::new(*x, *y, *z))
+        }
+        [_, _, _] => Err("expected three finite numbers x,y,z".into()),
+        _ => Err(format!("expected three numbers x,y,z, got {}", parts.len())),
+    }
 }
 
 /// Prints `value` as one JSON object on standard output.
