@@ -2,4 +2,11 @@
 //! outward-facing surface for a solid, a closed collision proxy for a one-view shell, and
 //! convex parts with mass properties for a body that can move.
 
+pub mod convex;
+pub mod error;
+pub mod mass;
 pub mod orientation;
+
+pub use convex::{convex_parts, ConvexConfig, ConvexParts, Decomposition};
+pub use error::PhysicsError;
+pub use mass::MassProperties;
