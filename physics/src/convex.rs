@@ -13,11 +13,14 @@
 //!    mesh's own triangles clipped to each voxel part (not from the voxels, which would
 //!    inflate each part by up to a voxel). If V-HACD finds no part with volume (a mesh
 //!    thinner than a voxel), the fallback is the single hull;
-//! 4. **merge** the pair of hulls whose merged hull adds the least volume, while there are
+//! 4. **cover**: a mesh vertex outside every hull joins the hull nearest to it (V-HACD loses
+//!    thin features at coarse resolutions, and the hulls must not miss the surface they
+//!    stand for; the triangles between covered vertices can still cross a gap between hulls);
+//! 5. **merge** the pair of hulls whose merged hull adds the least volume, while there are
 //!    more than [`ConvexConfig::max_hulls`] or the cheapest merge adds less than V-HACD's own
 //!    concavity bound (parry's V-HACD only bounds the depth of its splits, so it may return
 //!    up to twice `max_hulls` parts, and it splits off slivers a merge costs nothing to undo);
-//! 5. **reduce** each hull to at most [`ConvexConfig::max_hull_vertices`] by growing it from
+//! 6. **reduce** each hull to at most [`ConvexConfig::max_hull_vertices`] by growing it from
 //!    four extreme vertices, always adding the vertex farthest outside, so the reduced hull
 //!    lies inside the full one and misses it by at most [`ConvexParts::hull_reduction_m`].
 //!
@@ -180,6 +183,10 @@ fn extent_and_thickness(hull: &Hull) -> (f32, f32) {
     ((hi - lo).max_element(), thickness)
 }
 
+/// A mesh vertex farther than this (relative to the extent) outside every hull is added to
+/// the nearest one.
+const COVER_TOLERANCE: f32 = 1e-4;
+
 /// Below this thickness relative to the extent a mesh is flat.
 const FLAT_RATIO: f32 = 1e-3;
 
@@ -219,6 +226,40 @@ fn vhacd_hulls(mesh: &TriMesh, config: &ConvexConfig) -> Vec<Hull> {
         .compute_exact_convex_hulls(&mesh.vertices, &mesh.triangles)
         .into_iter()
         .filter_map(|(points, _)| Hull::of(&points))
+        .collect()
+}
+
+// ---- cover ----------------------------------------------------------------------------------
+
+/// Adds each mesh vertex that lies outside every hull (by more than `tolerance_m`) to the
+/// hull it is nearest outside of. V-HACD's exact hulls can miss a thin feature where its
+/// voxel parts lose it (3.8 mm of the 92-face torus at 20 mm noise was outside every hull).
+/// Only vertices: covering whole triangles too made the hulls bulge far more (hull volume
+/// 1.46 times the monkey's, against 1.08) for little gain.
+fn cover_vertices(hulls: Vec<Hull>, vertices: &[Vec3], tolerance_m: f32) -> Vec<Hull> {
+    let mut missed: Vec<Vec<Vec3>> = vec![Vec::new(); hulls.len()];
+    for &v in vertices {
+        let nearest = hulls
+            .iter()
+            .enumerate()
+            .map(|(k, hull)| (k, hull.distance_outside(v)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((k, outside)) = nearest {
+            if outside > tolerance_m {
+                missed[k].push(v);
+            }
+        }
+    }
+    hulls
+        .into_iter()
+        .zip(missed)
+        .map(|(hull, missed)| {
+            if missed.is_empty() {
+                return hull;
+            }
+            let points: Vec<Vec3> = hull.points.iter().chain(&missed).copied().collect();
+            Hull::of(&points).unwrap_or(hull)
+        })
         .collect()
 }
 
@@ -336,6 +377,8 @@ pub fn convex_parts(mesh: &TriMesh, config: &ConvexConfig) -> Result<ConvexParts
             (vec![whole_hull], Decomposition::SingleHullFallback)
         } else {
             let parts = found.len();
+            let (extent_m, _) = extent_and_thickness(&whole_hull);
+            let found = cover_vertices(found, &mesh.vertices, COVER_TOLERANCE * extent_m);
             let free_volume_m3 = f64::from(config.concavity) * whole_hull.volume_m3;
             (
                 merge_hulls(found, config.max_hulls, free_volume_m3),
