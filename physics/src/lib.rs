@@ -1,6 +1,22 @@
 //! What a physics engine needs from a mesh, beyond its distance to the truth: a closed,
 //! outward-facing surface for a solid, a closed collision proxy for a one-view shell, and
-//! convex parts with mass properties for a body that can move.
+//! convex parts with mass properties for a body that can move, and a MuJoCo scene (MJCF) of
+//! them all.
 
+pub mod convex;
+pub mod error;
+pub mod mass;
+pub mod mjcf;
 pub mod orientation;
 pub mod proxy;
+pub mod stl;
+
+pub use convex::{convex_parts, ConvexConfig, ConvexParts, Decomposition};
+pub use error::PhysicsError;
+pub use mass::MassProperties;
+pub use mjcf::{
+    mjcf_document, write_mjcf, MjcfConfig, MjcfDocument, Motion, Scene, SceneBody, ScenePlane,
+    WorldFromBody, WrittenScene,
+};
+pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
+pub use tacmesh_source::TriMesh;

@@ -1,0 +1,98 @@
+//! Writes a demo MuJoCo scene: a 10 cm cube resting on a support plane and a 5 cm sphere
+//! dropped beside it, each with its convex parts and mass properties, and a static box.
+//!
+//! `cargo run -p tacmesh-physics --example write_mjcf -- DIR [--up z|y]`
+//!
+//! `--up y` builds the same scene in a world whose up is +Y (gravity along -Y, the plane's
+//! normal +Y), as a camera's frame might be. `python/tests/test_mjcf.py` loads and steps it.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use glam::{Quat, Vec3};
+use tacmesh_physics::{
+    convex_parts, write_mjcf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Scene, SceneBody,
+    ScenePlane, TriMesh, WorldFromBody,
+};
+use tacmesh_sim::{cube, uv_sphere};
+
+/// A body whose collision parts and inertia come from its mesh.
+fn body(
+    name: &str,
+    mesh: TriMesh,
+    world_from_body: WorldFromBody,
+    motion: Motion,
+) -> Result<SceneBody, PhysicsError> {
+    let parts = convex_parts(&mesh, &ConvexConfig::default())?;
+    Ok(SceneBody {
+        name: name.into(),
+        world_from_body,
+        visual: mesh,
+        convex_parts: parts.hulls,
+        mass: parts.mesh_mass,
+        motion,
+    })
+}
+
+fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
+    // Turns the z-up layout into the requested up.
+    let world_from_layout = Quat::from_rotation_arc(Vec3::Z, up);
+    let at = |p: Vec3, yaw: f32| WorldFromBody {
+        rotation: world_from_layout * Quat::from_rotation_z(yaw),
+        translation_m: world_from_layout * p,
+    };
+    Ok(Scene {
+        gravity_m_s2: -9.81 * up,
+        supports: vec![ScenePlane {
+            name: "table".into(),
+            point_in_world: Vec3::ZERO,
+            normal_in_world: up,
+            drawn_half_size_m: 1.0,
+        }],
+        bodies: vec![
+            // Resting: its lowest face on the plane.
+            body(
+                "cube",
+                cube(0.1),
+                at(Vec3::new(0.0, 0.0, 0.05), 0.4),
+                Motion::Dynamic,
+            )?,
+            body(
+                "sphere",
+                uv_sphere(16, 8, 0.05),
+                at(Vec3::new(0.3, 0.0, 0.2), 0.0),
+                Motion::Dynamic,
+            )?,
+            body(
+                "wall",
+                cube(0.2),
+                at(Vec3::new(-0.5, 0.0, 0.1), 0.0),
+                Motion::Static,
+            )?,
+        ],
+    })
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (dir, up) = match args.as_slice() {
+        [dir] => (PathBuf::from(dir), Vec3::Z),
+        [dir, flag, axis] if flag == "--up" && axis == "z" => (PathBuf::from(dir), Vec3::Z),
+        [dir, flag, axis] if flag == "--up" && axis == "y" => (PathBuf::from(dir), Vec3::Y),
+        _ => {
+            eprintln!("usage: write_mjcf DIR [--up z|y]");
+            return ExitCode::from(2);
+        }
+    };
+    let written = demo_scene(up).and_then(|scene| write_mjcf(&dir, &scene, &MjcfConfig::default()));
+    match written {
+        Ok(written) => {
+            println!("{}", written.scene_xml.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("write_mjcf: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
