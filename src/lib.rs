@@ -14,6 +14,7 @@ pub mod daemon;
 pub mod frame_ring;
 pub mod latency;
 pub mod log_sink;
+pub mod physics_scene;
 pub mod pipeline;
 pub mod subscriber;
 

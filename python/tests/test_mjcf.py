@@ -1,6 +1,7 @@
 """The MJCF scene the Rust writer produces (`tacmesh_physics::write_mjcf`) loads in MuJoCo and
 behaves: a cube resting on the support plane stays there, a sphere dropped beside it lands and
-settles, in a z-up world and in a y-up one.
+settles, in a z-up world and in a y-up one. And the scene `tacmesh subscribe --out DIR --mjcf`
+keeps of the daemon's demo scene loads, and its objects rest on the table.
 
 The scene comes from the example `physics/examples/write_mjcf.rs`, named by
 TACMESH_MJCF_EXAMPLE (`cargo build -p tacmesh-physics --example write_mjcf`, then
@@ -18,6 +19,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pytest
+
+from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
 
 mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not installed")
 
@@ -89,3 +92,41 @@ def test_cube_rests_and_sphere_lands(
     assert SPHERE_RADIUS_M - 0.004 < np.dot(sphere, up) < SPHERE_RADIUS_M + 0.002
     # Nothing is still moving fast (the sphere hit the plane at about 1.7 m/s).
     assert np.max(np.abs(data.qvel)) < 0.2
+
+
+def test_the_subscribers_scene_of_the_demo_rests_on_its_table(
+    daemon: Daemon, tmp_path: Path
+) -> None:
+    done = subprocess.run(
+        [
+            str(daemon_binary()),
+            "subscribe",
+            "--socket",
+            str(daemon.socket_path),
+            "--out",
+            str(tmp_path),
+            "--mjcf",
+            "--count",
+            "40",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    # The demo's objects (the world body is body 0) on its table, a plane.
+    assert model.nbody - 1 >= 3, done.stdout
+    assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)) == 1
+    start = np.array(data.xpos)
+    for _ in range(5 * STEPS):
+        mujoco.mj_step(model, data)
+    assert np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))
+    # Each body rests where the daemon put it: standing on the plane, not falling through it,
+    # not thrown off it (each proxy stands on the table; contact settles within millimetres).
+    moved = np.linalg.norm(np.array(data.xpos)[1:] - start[1:], axis=1)
+    assert np.all(moved < 0.01), moved
+    assert np.max(np.abs(data.qvel)) < 0.1

@@ -1,11 +1,13 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::default_socket_path;
 use tacmesh::daemon::planes::FIRST_PLANE_ID;
+use tacmesh::physics::mjcf::{write_mjcf, MjcfConfig};
+use tacmesh::physics_scene::PhysicsScene;
 use tacmesh::protocol::{Encoding, Kinds, Message, Pose, Scene, SceneChange, Shape, Subscribe};
 use tacmesh::source::monotonic_now;
 use tacmesh::subscriber::Subscription;
@@ -26,6 +28,13 @@ pub struct SubscribeArgs {
     /// half-written; deleted when the object is removed)
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+    /// With --out: also keep a MuJoCo scene of the objects there, DIR/scene.xml with its meshes
+    /// in DIR/meshes: each object a free body with convex collision parts (an open one-view
+    /// shell first extruded down onto its support) and mass properties at 500 kg/m³, each
+    /// support plane a plane, gravity towards the largest. Rewritten whole after every new
+    /// shape or removal and at most once a second for moves
+    #[arg(long, requires = "out")]
+    mjcf: bool,
     /// Exit after this many updates (shapes and poses)
     #[arg(long, value_name = "N")]
     count: Option<u64>,
@@ -175,6 +184,11 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     writeln!(out, "connected to {from}")?;
     let mut updates = 0u64;
     let mut scene = Scene::new();
+    let mut mjcf = args.mjcf.then(|| MjcfOutput {
+        physics: PhysicsScene::new(),
+        written_at: None,
+        warned: Default::default(),
+    });
     loop {
         if args.count.is_some_and(|n| updates >= n) {
             return Ok(());
@@ -268,6 +282,63 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
         }
+        if let (Some(dir), Some(mjcf)) = (&args.out, mjcf.as_mut()) {
+            let reshaped = matches!(
+                change,
+                SceneChange::SnapshotDone
+                    | SceneChange::Added(_)
+                    | SceneChange::Reshaped(_)
+                    | SceneChange::Removed(_)
+            );
+            let moved = matches!(change, SceneChange::Moved(_));
+            if scene.snapshot_done() && (reshaped || (moved && mjcf.due())) {
+                mjcf.write(dir, &scene)?;
+            }
+        }
+    }
+}
+
+/// The MuJoCo scene `--mjcf` keeps in the output folder.
+struct MjcfOutput {
+    physics: PhysicsScene,
+    written_at: Option<Instant>,
+    /// Objects already warned about, so a shape that cannot collide is said once.
+    warned: std::collections::HashSet<u64>,
+}
+
+impl MjcfOutput {
+    /// Moves alone rewrite the scene at most this often.
+    const MOVE_INTERVAL: Duration = Duration::from_secs(1);
+
+    fn due(&self) -> bool {
+        self.written_at
+            .is_none_or(|at| at.elapsed() >= Self::MOVE_INTERVAL)
+    }
+
+    fn write(&mut self, dir: &Path, scene: &Scene) -> anyhow::Result<()> {
+        let update = self.physics.update(scene);
+        for (id, why) in &update.left_out {
+            if self.warned.insert(*id) {
+                tracing::warn!("object {id} is left out of the MuJoCo scene: {why}");
+            }
+        }
+        let written = write_mjcf(dir, &update.scene, &MjcfConfig::default())
+            .with_context(|| format!("writing the MuJoCo scene in {}", dir.display()))?;
+        self.written_at = Some(Instant::now());
+        // Meshes of objects gone, or parts an object no longer has: the scene names none.
+        let keep: std::collections::HashSet<&Path> =
+            written.mesh_files.iter().map(PathBuf::as_path).collect();
+        let mesh_dir = dir.join(tacmesh::physics::mjcf::MESH_FOLDER);
+        for entry in std::fs::read_dir(&mesh_dir)
+            .with_context(|| format!("listing {}", mesh_dir.display()))?
+            .flatten()
+        {
+            let path = entry.path();
+            if path.extension().is_some_and(|e| e == "stl") && !keep.contains(path.as_path()) {
+                let _ = std::fs::remove_file(&path);
+            }
+        }
+        Ok(())
     }
 }
 

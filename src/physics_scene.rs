@@ -1,0 +1,223 @@
+//! A physics scene of what a subscriber holds (`tacmesh subscribe --out DIR --mjcf`): each
+//! object a moving body with convex collision parts and mass properties, each support plane a
+//! plane, gravity towards the largest support.
+//!
+//! Each object's collision parts come from its published shape: a closed shape is decomposed as
+//! it is; an open one (a one-view shell) is first closed into a proxy, extruded straight down
+//! onto the support it stands on (the subscriber knows neither the sensor's position nor what
+//! it saw as empty, so it cannot sweep the shell along the sensor's rays as the daemon could)
+//! and grown by the shape's residual. The parts are recomputed only when an object's shape
+//! version changes: a move only moves the body.
+
+use std::collections::HashMap;
+
+use glam::{Affine3A, Vec3};
+use tacmesh_physics::mjcf::{Motion, Scene as MjcfScene, SceneBody, ScenePlane, WorldFromBody};
+use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
+use tacmesh_physics::{convex_parts, ConvexConfig, MassProperties};
+use tacmesh_protocol::{Scene, SceneObject};
+use tacmesh_source::TriMesh;
+
+use crate::daemon::planes::FIRST_PLANE_ID;
+
+/// Standard gravity, m/s².
+const GRAVITY_M_S2: f32 = 9.806_65;
+
+/// An object's collision parts, for one shape version.
+struct Collision {
+    shape_version: u64,
+    /// The parts and their mass, or why there are none.
+    parts: Result<(Vec<TriMesh>, MassProperties, ProxyKind), String>,
+}
+
+/// Collision parts of a subscriber's objects, kept from update to update.
+#[derive(Default)]
+pub struct PhysicsScene {
+    collisions: HashMap<u64, Collision>,
+}
+
+/// What [`PhysicsScene::update`] made of the scene.
+pub struct PhysicsUpdate {
+    pub scene: MjcfScene,
+    /// Objects whose collision parts were (re)computed in this update.
+    pub decomposed: usize,
+    /// Objects left out, with why (a shape too flat or small to hold a volume).
+    pub left_out: Vec<(u64, String)>,
+}
+
+/// A support plane of the scene in the world: a point on it, its unit normal (towards the
+/// side the published fan faces, where the objects stand) and its area.
+struct WorldSupport {
+    object_id: u64,
+    point: Vec3,
+    normal: Vec3,
+    area_m2: f32,
+    half_size_m: f32,
+}
+
+fn world_support(object: &SceneObject) -> Option<WorldSupport> {
+    let mesh = object.world_mesh();
+    let mut area_normal = Vec3::ZERO;
+    let mut centre = Vec3::ZERO;
+    let mut area = 0.0;
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+        let n = (b - a).cross(c - a);
+        area_normal += n;
+        area += 0.5 * n.length();
+        centre += 0.5 * n.length() * (a + b + c) / 3.0;
+    }
+    let normal = area_normal.try_normalize()?;
+    let point = centre / area;
+    let half_size_m = mesh
+        .vertices
+        .iter()
+        .map(|v| v.distance(point))
+        .fold(0.0f32, f32::max);
+    Some(WorldSupport {
+        object_id: object.object_id(),
+        point,
+        normal,
+        area_m2: area,
+        half_size_m,
+    })
+}
+
+impl PhysicsScene {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The physics scene of `scene` now: collision parts of new shapes computed, those of
+    /// objects gone forgotten.
+    pub fn update(&mut self, scene: &Scene) -> PhysicsUpdate {
+        let supports: Vec<WorldSupport> = scene
+            .objects()
+            .filter(|o| o.shape.is_support())
+            .filter_map(world_support)
+            .collect();
+        // Gravity pulls towards the largest support (the floor or the table the camera looks
+        // at); with none, along −z.
+        let up = supports
+            .iter()
+            .max_by(|a, b| a.area_m2.total_cmp(&b.area_m2))
+            .map_or(Vec3::Z, |s| s.normal);
+
+        self.collisions
+            .retain(|id, _| scene.get(*id).is_some_and(|o| !o.shape.is_support()));
+        let mut decomposed = 0;
+        let mut left_out = Vec::new();
+        let mut bodies = Vec::new();
+        let mut objects: Vec<&SceneObject> =
+            scene.objects().filter(|o| !o.shape.is_support()).collect();
+        objects.sort_by_key(|o| o.object_id());
+        for object in objects {
+            let id = object.object_id();
+            let world_from_object = object.pose.world_from_object();
+            let stale = self
+                .collisions
+                .get(&id)
+                .is_none_or(|c| c.shape_version != object.shape.version());
+            if stale {
+                decomposed += 1;
+                let support = support_under(&supports, object, world_from_object);
+                self.collisions.insert(
+                    id,
+                    Collision {
+                        shape_version: object.shape.version(),
+                        parts: collision_parts(object, support),
+                    },
+                );
+            }
+            match &self.collisions[&id].parts {
+                Ok((parts, mass, _)) => bodies.push(SceneBody {
+                    name: format!("object-{id}"),
+                    world_from_body: WorldFromBody {
+                        rotation: object.pose.rotation,
+                        translation_m: object.pose.translation,
+                    },
+                    visual: object.shape.mesh.clone(),
+                    convex_parts: parts.clone(),
+                    mass: *mass,
+                    motion: Motion::Dynamic,
+                }),
+                Err(why) => left_out.push((id, why.clone())),
+            }
+        }
+        PhysicsUpdate {
+            scene: MjcfScene {
+                gravity_m_s2: -GRAVITY_M_S2 * up,
+                supports: supports
+                    .iter()
+                    .map(|s| ScenePlane {
+                        name: match s.object_id.checked_sub(FIRST_PLANE_ID) {
+                            Some(n) => format!("plane-{}", n + 1),
+                            None => format!("support-{}", s.object_id),
+                        },
+                        point_in_world: s.point,
+                        normal_in_world: s.normal,
+                        drawn_half_size_m: s.half_size_m,
+                    })
+                    .collect(),
+                bodies,
+            },
+            decomposed,
+            left_out,
+        }
+    }
+}
+
+/// The support an object stands on, in the object's frame: the one it is above and nearest to
+/// (by its lowest vertex along each support's normal).
+fn support_under(
+    supports: &[WorldSupport],
+    object: &SceneObject,
+    world_from_object: Affine3A,
+) -> Option<SupportPlane> {
+    let world = object.world_mesh();
+    let nearest = supports
+        .iter()
+        .filter_map(|s| {
+            let lowest = world
+                .vertices
+                .iter()
+                .map(|v| s.normal.dot(*v - s.point))
+                .fold(f32::INFINITY, f32::min);
+            // Standing on it: its lowest point no more than a few centimetres under the plane
+            // (noise, and the segmentation's margin) and above it otherwise.
+            (lowest > -0.05).then_some((lowest, s))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))?
+        .1;
+    // n·x = n·p in the world; with x = R·x_o + t: (Rᵀn)·x_o = n·p − n·t.
+    let object_from_world = world_from_object.inverse();
+    let normal = object_from_world.transform_vector3(nearest.normal);
+    let offset = nearest.normal.dot(nearest.point)
+        - nearest.normal.dot(world_from_object.translation.into());
+    Some(SupportPlane { normal, offset })
+}
+
+/// The convex parts and mass properties of one object: its closed shape's, or its open shell's
+/// extruded onto its support.
+fn collision_parts(
+    object: &SceneObject,
+    support: Option<SupportPlane>,
+) -> Result<(Vec<TriMesh>, MassProperties, ProxyKind), String> {
+    let proxy = collision_proxy(
+        &object.shape.mesh,
+        None,
+        support,
+        &ProxyConfig {
+            margin_m: object.shape.report.max_residual_m,
+            ..ProxyConfig::default()
+        },
+    );
+    if !proxy.closed {
+        return Err(format!(
+            "its {} is not closed (an open shell with no support under it)",
+            proxy.kind.as_str()
+        ));
+    }
+    let parts = convex_parts(&proxy.mesh, &ConvexConfig::default()).map_err(|e| e.to_string())?;
+    Ok((parts.hulls, parts.mesh_mass, proxy.kind))
+}
