@@ -240,6 +240,54 @@ fn one_view_shells_face_the_sensor() {
     );
 }
 
+/// Thin parts of a sampled closed shape stay closed: Suzanne's ears (3 cm, thinner than the
+/// box a tangent plane is fitted over, so one plane stands for both sides) and the cone's rim
+/// and apex. The reconstruction decides this (the marching-cubes mesh was open at the ears),
+/// so the simplified mesh is judged as the pipeline returns it.
+#[test]
+fn thin_parts_of_closed_shapes_stay_closed() {
+    let mut cases = Vec::new();
+    for seed in 1..=3 {
+        cases.push((Shape::Monkey, 20.0, seed));
+        cases.push((Shape::Cone, 20.0, seed));
+    }
+    // The noise-free cone was open at its rim on these seeds, and closed on 1–4.
+    for seed in 1..=6 {
+        cases.push((Shape::Cone, 0.0, seed));
+    }
+    let open: Vec<String> = cases
+        .par_iter()
+        .filter_map(|&(shape, noise_mm, seed)| {
+            let cloud = sample_cloud(
+                &shape.mesh(),
+                &SampleConfig {
+                    points: 40_000,
+                    noise_sigma_m: noise_mm / 1000.0,
+                    seed,
+                },
+            )
+            .expect("sampling a built-in shape");
+            let (mesh, report) = match mesh_cloud(&cloud, &MeshConfig::default()) {
+                Ok(meshed) => meshed,
+                Err(err) => return Some(format!("{shape:?} at {noise_mm} mm, seed {seed}: {err}")),
+            };
+            (!orientation(&mesh).is_closed()).then(|| {
+                format!(
+                    "{shape:?} at {noise_mm} mm, seed {seed}: open ({} faces, {} open pieces)",
+                    report.faces, report.open_pieces
+                )
+            })
+        })
+        .collect();
+    assert!(
+        open.is_empty(),
+        "{} of {} meshes are open:\n{}",
+        open.len(),
+        cases.len(),
+        open.join("\n")
+    );
+}
+
 /// The judge itself: a true shape agrees with itself, and turned inside out it disagrees.
 #[test]
 fn the_outward_judge_tells_an_inverted_mesh() {

@@ -6,9 +6,11 @@
 //! - [`moment_grid::MomentGrid`]: the fused state, point moments per voxel;
 //! - [`cell_planes::fit_cell_planes`] and the orient functions: a tangent plane per voxel;
 //! - [`signed_distance::signed_distance_near`]: a smoothed signed distance in sparse blocks;
+//! - [`enclosed_band::close_where_band_ends`]: closes thin parts of a closed surface;
 //! - [`marching_cubes::marching_cubes`]: the zero level set of a [`sparse_sdf::SparseSdf`].
 
 pub mod cell_planes;
+pub mod enclosed_band;
 pub mod marching_cubes;
 pub mod moment_grid;
 pub mod moments;

@@ -1,5 +1,6 @@
 //! The whole reconstruction in pipeline order: moments per voxel → a tangent plane per voxel →
-//! orientation → signed distance near the data → marching cubes → drop noise fragments.
+//! orientation → signed distance near the data → close thin parts (no viewpoint only) →
+//! marching cubes → drop noise fragments.
 //!
 //! Entry points: [`reconstruct_surface`] for one cloud, [`mesh_moment_grid`] for a fused state
 //! that grows frame by frame.
@@ -10,6 +11,7 @@ use glam::Vec3;
 use tacmesh_source::{PointCloud, TriMesh};
 
 use crate::cell_planes::{fit_cell_planes, orient_by_propagation, orient_towards, TwoScaleGrid};
+use crate::enclosed_band::close_where_band_ends;
 use crate::marching_cubes::marching_cubes;
 use crate::moment_grid::MomentGrid;
 use crate::signed_distance::{signed_distance_near, SignedDistanceConfig};
@@ -181,7 +183,7 @@ pub fn mesh_moment_grid(
     report.orient_ms = elapsed_ms(start);
 
     let start = Instant::now();
-    let sdf = signed_distance_near(
+    let mut sdf = signed_distance_near(
         &planes,
         &SignedDistanceConfig {
             voxel_size_m: grid.voxel_size_m(),
@@ -189,6 +191,11 @@ pub fn mesh_moment_grid(
             kernel_width_voxels: config.kernel_width_voxels,
         },
     );
+    // A closed object's thin parts (one plane for both sides) end where the band ends; close
+    // them there. A one-view scan is an open shell with no inside, and stays open.
+    if config.orientation == Orientation::Propagate {
+        close_where_band_ends(&mut sdf, config.band_voxels);
+    }
     report.distance_ms = elapsed_ms(start);
 
     let start = Instant::now();
