@@ -179,19 +179,10 @@ fn check(case: &Case) -> Option<String> {
     })
 }
 
-const SHAPES: [Shape; 6] = [
-    Shape::Cone,
-    Shape::Cube,
-    Shape::Cylinder,
-    Shape::Monkey,
-    Shape::Torus,
-    Shape::Sphere,
-];
-
 #[test]
 fn no_closed_shape_comes_out_inside_out() {
     let mut cases = Vec::new();
-    for shape in SHAPES {
+    for shape in Shape::ALL {
         for noise_mm in [0.0, 20.0, 40.0] {
             for points in [20_000, 40_000] {
                 for seed in [101, 102] {
@@ -219,7 +210,7 @@ fn no_closed_shape_comes_out_inside_out() {
 #[test]
 fn one_view_shells_face_the_sensor() {
     let mut cases = Vec::new();
-    for shape in SHAPES {
+    for shape in Shape::ALL {
         for (noise_mm, seed) in [(20.0, 201), (40.0, 202)] {
             cases.push(Case {
                 shape,
@@ -318,7 +309,7 @@ fn proxies_of_one_view_shells_are_closed_and_hold_the_object() {
          contact mm |"
     );
     eprintln!("|---|---:|---|---:|---:|---:|---|---|");
-    for shape in SHAPES {
+    for shape in Shape::ALL {
         let truth = shape.mesh();
         // The shapes fit a 1 m box centred on the origin: the table is its bottom.
         let bottom = truth

@@ -103,37 +103,6 @@ fn view_facing_of(mesh: &TriMesh, faces: impl Iterator<Item = usize>, viewpoint:
     }
 }
 
-/// Each face's piece (an index into pieces) and the number of pieces.
-fn pieces(mesh: &TriMesh) -> (Vec<u32>, usize) {
-    let mut parent: Vec<u32> = (0..mesh.vertices.len() as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
-    for &[a, b, c] in &mesh.triangles {
-        for (u, v) in [(a, b), (b, c)] {
-            let (ru, rv) = (find(&mut parent, u), find(&mut parent, v));
-            if ru != rv {
-                parent[ru.max(rv) as usize] = ru.min(rv);
-            }
-        }
-    }
-    let mut index_of_root = HashMap::new();
-    let piece_of_face = mesh
-        .triangles
-        .iter()
-        .map(|t| {
-            let root = find(&mut parent, t[0]);
-            let next = index_of_root.len() as u32;
-            *index_of_root.entry(root).or_insert(next)
-        })
-        .collect();
-    (piece_of_face, index_of_root.len())
-}
-
 /// Per undirected edge: how many faces use it in each direction (lower index first or not).
 fn edge_uses(mesh: &TriMesh) -> HashMap<(u32, u32), [u32; 2]> {
     let mut uses: HashMap<(u32, u32), [u32; 2]> = HashMap::with_capacity(mesh.triangles.len() * 2);
@@ -160,7 +129,7 @@ pub fn orientation(mesh: &TriMesh) -> Orientation {
         }
     }
     Orientation {
-        pieces: pieces(mesh).1,
+        pieces: mesh.face_pieces().1,
         boundary_edges,
         inconsistent_edges,
         nonmanifold_edges,
@@ -182,7 +151,7 @@ pub struct OrientOutcome {
 /// open piece so that it faces `viewpoint` (area-weighted) when one is given, and otherwise so
 /// that the volume it nearly encloses is positive.
 pub fn orient_outward(mesh: &mut TriMesh, viewpoint: Option<Vec3>) -> OrientOutcome {
-    let (piece_of_face, count) = pieces(mesh);
+    let (piece_of_face, count) = mesh.face_pieces();
     let mut faces_of: Vec<Vec<usize>> = vec![Vec::new(); count];
     for (f, &p) in piece_of_face.iter().enumerate() {
         faces_of[p as usize].push(f);

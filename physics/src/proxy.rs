@@ -154,11 +154,10 @@ pub fn collision_proxy(
         }
     };
 
-    let (lo, hi) = visual.vertices.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), &v| (lo.min(v), hi.max(v)),
-    );
-    let extent = (hi - lo).max_element();
+    // Not empty: an empty mesh returned above as its own (closed) proxy.
+    let extent = visual
+        .bounds()
+        .map_or(0.0, |(lo, hi)| (hi - lo).max_element());
     let max_depth = config.max_depth_of_extent * extent;
     let drop_height = config.drop_height_of_extent * extent;
     let mut capped_vertices = 0;

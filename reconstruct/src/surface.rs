@@ -80,39 +80,18 @@ fn elapsed_ms(since: Instant) -> f64 {
 /// piece's faces; returns how many pieces went.
 pub fn drop_small_pieces(mesh: &mut TriMesh, min_fraction: f32) -> usize {
     let n = mesh.vertices.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
+    let (piece_of_face, pieces_before) = mesh.face_pieces();
+    let mut faces_per_piece = vec![0usize; pieces_before];
+    for &piece in &piece_of_face {
+        faces_per_piece[piece as usize] += 1;
     }
-    for &[a, b, c] in &mesh.triangles {
-        for (u, v) in [(a, b), (b, c)] {
-            let (ru, rv) = (find(&mut parent, u), find(&mut parent, v));
-            if ru != rv {
-                parent[ru.max(rv) as usize] = ru.min(rv);
-            }
-        }
-    }
-    let mut faces_per_root = vec![0usize; n];
-    let roots: Vec<u32> = mesh
-        .triangles
-        .iter()
-        .map(|t| find(&mut parent, t[0]))
-        .collect();
-    for &r in &roots {
-        faces_per_root[r as usize] += 1;
-    }
-    let largest = faces_per_root.iter().copied().max().unwrap_or(0);
+    let largest = faces_per_piece.iter().copied().max().unwrap_or(0);
     let keep_from = (largest as f32 * min_fraction).ceil() as usize;
-    let pieces_before = faces_per_root.iter().filter(|&&f| f > 0).count();
-    let mut kept = roots
+    let mut kept = piece_of_face
         .iter()
-        .map(|&r| faces_per_root[r as usize] >= keep_from);
+        .map(|&piece| faces_per_piece[piece as usize] >= keep_from);
     mesh.triangles.retain(|_| kept.next().unwrap_or(false));
-    let pieces_after = faces_per_root
+    let pieces_after = faces_per_piece
         .iter()
         .filter(|&&f| f >= keep_from.max(1))
         .count();

@@ -46,6 +46,43 @@ impl TriMesh {
             .sum()
     }
 
+    /// The connected piece of each face (faces sharing a vertex are in one piece), numbered
+    /// 0.. in the order of each piece's first face, and the number of pieces. A union-find
+    /// over the vertices, with path halving.
+    pub fn face_pieces(&self) -> (Vec<u32>, usize) {
+        let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
+        fn find(parent: &mut [u32], mut x: u32) -> u32 {
+            while parent[x as usize] != x {
+                parent[x as usize] = parent[parent[x as usize] as usize];
+                x = parent[x as usize];
+            }
+            x
+        }
+        for &[a, b, c] in &self.triangles {
+            for (u, v) in [(a, b), (b, c)] {
+                let (ru, rv) = (find(&mut parent, u), find(&mut parent, v));
+                if ru != rv {
+                    parent[ru.max(rv) as usize] = ru.min(rv);
+                }
+            }
+        }
+        let mut piece_of_root = vec![u32::MAX; self.vertices.len()];
+        let mut pieces = 0u32;
+        let piece_of_face = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let root = find(&mut parent, t[0]) as usize;
+                if piece_of_root[root] == u32::MAX {
+                    piece_of_root[root] = pieces;
+                    pieces += 1;
+                }
+                piece_of_root[root]
+            })
+            .collect();
+        (piece_of_face, pieces as usize)
+    }
+
     /// The first triangle whose index points past the vertex list, if any.
     pub fn first_bad_index(&self) -> Option<(usize, u32)> {
         let n = self.vertices.len() as u32;
@@ -80,5 +117,16 @@ mod tests {
             vec![[0, 1, 2], [0, 3, 1]],
         );
         assert_eq!(mesh.first_bad_index(), Some((1, 3)));
+    }
+
+    #[test]
+    fn faces_sharing_a_vertex_are_one_piece() {
+        // Two triangles sharing vertex 2, and one apart (listed between them).
+        let vertices = (0..8)
+            .map(|i| Vec3::new(i as f32, (i % 2) as f32, 0.0))
+            .collect();
+        let mesh = TriMesh::new(vertices, vec![[0, 1, 2], [5, 6, 7], [2, 3, 4]]);
+        assert_eq!(mesh.face_pieces(), (vec![0, 1, 0], 2));
+        assert_eq!(TriMesh::default().face_pieces(), (vec![], 0));
     }
 }
