@@ -6,15 +6,15 @@ use glam::{Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::encode::{
-    check_flags, check_id_count, check_kinds, check_number, check_pose, check_triangle,
-    check_vertex, compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, ID_BYTES, PREFIX_BYTES,
-    SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND, TRIANGLE_BYTES,
-    VERTEX_BYTES,
+    check_body_proxy, check_finite, check_flags, check_hull_count, check_hull_size, check_id_count,
+    check_kinds, check_number, check_pose, check_triangle, check_vertex, compact_index_bytes,
+    CompactBox, COMPACT_VERTEX_BYTES, HULL_TRIANGLE_BYTES, ID_BYTES, PREFIX_BYTES, SHAPE_FLAGS,
+    STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND, TRIANGLE_BYTES, VERTEX_BYTES,
 };
 use crate::error::WireError;
 use crate::message::{
-    kind, Encoding, Message, Pose, Sender, Session, Shape, SimplifyStats, StageLatency, Stats,
-    Subscribe, MAX_FRAME_BYTES, MAX_NAME_BYTES, MAX_REASON_BYTES,
+    kind, Body, BodyProxy, Encoding, Hull, Message, Pose, Sender, Session, Shape, SimplifyStats,
+    StageLatency, Stats, Subscribe, MAX_FRAME_BYTES, MAX_NAME_BYTES, MAX_REASON_BYTES,
 };
 
 /// Splits a byte stream into frames and decodes them, for one direction of a connection.
@@ -121,6 +121,7 @@ fn decode_frame(frame: &[u8], from: Sender) -> Result<Message, WireError> {
         }),
         kind::SHAPE => Message::Shape(read_shape(&mut r)?),
         kind::POSE => Message::Pose(read_pose(&mut r)?),
+        kind::BODY => Message::Body(read_body(&mut r)?),
         kind::REMOVE => Message::Remove {
             object_id: r.u64("object_id")?,
         },
@@ -199,13 +200,7 @@ fn read_shape(r: &mut Reader<'_>) -> Result<Shape, WireError> {
     let faces_out = r.u32("faces_out")?;
     let max_residual_m = r.f32("max_residual_m")?;
     check_number("max_residual_m", max_residual_m)?;
-    let encoding = r.encoding()?;
-    let vertex_count = r.u32("vertex_count")? as usize;
-    let triangle_count = r.u32("triangle_count")? as usize;
-    let mesh = match encoding {
-        Encoding::Full => read_full_geometry(r, vertex_count, triangle_count)?,
-        Encoding::Compact => read_compact_geometry(r, vertex_count, triangle_count)?,
-    };
+    let (encoding, mesh) = read_geometry(r, |_, _| Ok(()))?;
     Ok(Shape {
         pose,
         shape_time_ns,
@@ -218,6 +213,90 @@ fn read_shape(r: &mut Reader<'_>) -> Result<Shape, WireError> {
             max_residual_m,
         },
         encoding,
+    })
+}
+
+/// The encoding byte, the two counts and the geometry (Shape's layout, also a Body's proxy's);
+/// `check_counts` sees the counts before anything is read by them.
+fn read_geometry(
+    r: &mut Reader<'_>,
+    check_counts: impl FnOnce(usize, usize) -> Result<(), WireError>,
+) -> Result<(Encoding, TriMesh), WireError> {
+    let encoding = r.encoding()?;
+    let vertex_count = r.u32("vertex_count")? as usize;
+    let triangle_count = r.u32("triangle_count")? as usize;
+    check_counts(vertex_count, triangle_count)?;
+    let mesh = match encoding {
+        Encoding::Full => read_full_geometry(r, vertex_count, triangle_count)?,
+        Encoding::Compact => read_compact_geometry(r, vertex_count, triangle_count)?,
+    };
+    Ok((encoding, mesh))
+}
+
+fn read_body(r: &mut Reader<'_>) -> Result<Body, WireError> {
+    let object_id = r.u64("object_id")?;
+    let shape_version = r.u64("shape_version")?;
+    let proxy_byte = r.u8("proxy")?;
+    let proxy = BodyProxy::from_byte(proxy_byte).ok_or(WireError::InvalidEnum {
+        message: r.message,
+        field: "proxy",
+        value: proxy_byte,
+        defined: "0 shape, 1 shadow volume, 2 extrusion",
+    })?;
+    let margin_m = r.f32("margin_m")?;
+    check_number("margin_m", margin_m)?;
+    let volume_m3 = r.f32("volume_m3")?;
+    let centre_of_mass = r.vec3("centre_of_mass")?;
+    check_finite(r.message, "centre_of_mass", &centre_of_mass.to_array())?;
+    let mut entries = [0.0f32; 6];
+    for entry in &mut entries {
+        *entry = r.f32("inertia")?;
+    }
+    check_finite(r.message, "inertia", &entries)?;
+    let [xx, yy, zz, xy, xz, yz] = entries;
+    let inertia = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
+    let (encoding, mesh) = read_geometry(r, |vertices, triangles| {
+        check_body_proxy(object_id, proxy, volume_m3, vertices, triangles)
+    })?;
+    let hull_count = usize::from(r.u8("hull_count")?);
+    check_hull_count(object_id, hull_count)?;
+    let mut hulls = Vec::with_capacity(hull_count);
+    for hull in 0..hull_count {
+        let vertex_count = usize::from(r.u8("hull vertex_count")?);
+        let triangle_count = usize::from(r.u16("hull triangle_count")?);
+        check_hull_size(object_id, hull, vertex_count, triangle_count)?;
+        let mut vertices = Vec::with_capacity(vertex_count);
+        for vertex in 0..vertex_count {
+            let p = r.vec3("hull vertices")?;
+            check_vertex(vertex, p)?;
+            vertices.push(p);
+        }
+        r.ensure(
+            "hull triangles",
+            (triangle_count * HULL_TRIANGLE_BYTES) as u64,
+        )?;
+        let mut triangles = Vec::with_capacity(triangle_count);
+        for triangle in 0..triangle_count {
+            let corners: [u8; 3] = r.array("hull triangles")?;
+            check_triangle(triangle, corners.map(u32::from), vertex_count)?;
+            triangles.push(corners);
+        }
+        hulls.push(Hull {
+            vertices,
+            triangles,
+        });
+    }
+    Ok(Body {
+        object_id,
+        shape_version,
+        proxy,
+        margin_m,
+        volume_m3,
+        centre_of_mass,
+        inertia,
+        mesh,
+        encoding,
+        hulls,
     })
 }
 
@@ -392,6 +471,7 @@ impl Reader<'_> {
             message: self.message,
             field: "encoding",
             value,
+            defined: "0 full, 1 compact",
         })
     }
 

@@ -9,8 +9,9 @@ use tacmesh_source::TriMesh;
 
 use crate::error::WireError;
 use crate::message::{
-    quantisation_bound_m, Encoding, Kinds, Message, Pose, Session, Shape, Stats, Subscribe,
-    MAX_FRAME_BYTES, MAX_NAME_BYTES, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, SHAPE_CLOSED,
+    quantisation_bound_m, Body, BodyProxy, Encoding, Hull, Kinds, Message, Pose, Session, Shape,
+    Stats, Subscribe, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES,
+    MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES, SHAPE_CLOSED, SHAPE_NEW_FRAME,
     SHAPE_SUPPORT,
 };
 
@@ -41,9 +42,16 @@ pub(crate) const SESSION_CLOCK_BYTES: usize = 2 * 8;
 pub(crate) const STATS_HEADER_BYTES: usize = 19 * 8 + 4 + 2 * 4 + 4;
 /// Bytes of one stage besides its name: u16 name length, 2 × f32 latencies.
 pub(crate) const STAGE_FIXED_BYTES: usize = 2 + 2 * 4;
+/// A Body payload before its proxy's geometry: id and version, the proxy byte, the margin,
+/// volume, centre of mass and six inertia entries, the encoding byte and the two u32 counts.
+pub(crate) const BODY_HEADER_BYTES: usize = 2 * 8 + 1 + 4 + 4 + 3 * 4 + 6 * 4 + 1 + 2 * 4;
+/// A hull before its vertices: the u8 vertex count and the u16 triangle count.
+pub(crate) const HULL_HEADER_BYTES: usize = 1 + 2;
+/// One hull triangle: three u8 indices.
+pub(crate) const HULL_TRIANGLE_BYTES: usize = 3;
 
 /// The bits a Shape's `flags` may have.
-pub(crate) const SHAPE_FLAGS: u8 = SHAPE_CLOSED | SHAPE_SUPPORT;
+pub(crate) const SHAPE_FLAGS: u8 = SHAPE_CLOSED | SHAPE_SUPPORT | SHAPE_NEW_FRAME;
 /// Subscribe's `flags`: bit 0 `resend`, bit 1 `extrapolate`.
 pub(crate) const SUBSCRIBE_RESEND: u8 = 1;
 pub(crate) const SUBSCRIBE_EXTRAPOLATE: u8 = 2;
@@ -126,7 +134,7 @@ pub(crate) fn check_flags(
     }
 }
 
-/// At least one kind, and no bit beyond the two defined.
+/// Objects or supports or both (bodies optional), and no bit beyond the three defined.
 pub(crate) fn check_kinds(message: &'static str, bits: u8) -> Result<Kinds, WireError> {
     check_flags(message, "kinds", bits, KIND_BITS)?;
     Kinds::from_bits(bits).ok_or(WireError::NoKinds { message })
@@ -173,6 +181,65 @@ pub(crate) fn check_triangle(
             vertex_count,
         }),
         None => Ok(()),
+    }
+}
+
+/// A body's volume is finite and positive, and a proxy that is the shape itself carries no
+/// mesh.
+pub(crate) fn check_body_proxy(
+    object_id: u64,
+    proxy: BodyProxy,
+    volume_m3: f32,
+    vertex_count: usize,
+    triangle_count: usize,
+) -> Result<(), WireError> {
+    if !(volume_m3.is_finite() && volume_m3 > 0.0) {
+        return Err(WireError::BodyVolume {
+            object_id,
+            volume_m3,
+        });
+    }
+    if proxy == BodyProxy::Shape && (vertex_count > 0 || triangle_count > 0) {
+        return Err(WireError::ProxyMeshNotEmpty {
+            object_id,
+            vertex_count,
+            triangle_count,
+        });
+    }
+    Ok(())
+}
+
+/// At most [`MAX_HULLS`] hulls.
+pub(crate) fn check_hull_count(object_id: u64, count: usize) -> Result<(), WireError> {
+    if count <= MAX_HULLS {
+        Ok(())
+    } else {
+        Err(WireError::TooManyHulls {
+            object_id,
+            count,
+            max: MAX_HULLS,
+        })
+    }
+}
+
+/// A hull has 4 to 255 vertices and at most twice as many triangles.
+pub(crate) fn check_hull_size(
+    object_id: u64,
+    hull: usize,
+    vertex_count: usize,
+    triangle_count: usize,
+) -> Result<(), WireError> {
+    if (MIN_HULL_VERTICES..=MAX_HULL_VERTICES).contains(&vertex_count)
+        && triangle_count <= 2 * vertex_count
+    {
+        Ok(())
+    } else {
+        Err(WireError::BadHull {
+            object_id,
+            hull,
+            vertex_count,
+            triangle_count,
+        })
     }
 }
 
@@ -323,6 +390,7 @@ fn payload_len(message: &Message) -> u64 {
         Message::Session(session) => SESSION_CLOCK_BYTES as u64 + options(&session.options),
         Message::Shape(shape) => shape_payload_len(shape),
         Message::Pose(_) => POSE_BYTES as u64,
+        Message::Body(body) => body_payload_len(body),
         Message::Remove { .. } => 8,
         Message::SnapshotDone | Message::SubscribeV1 => 0,
         Message::Stats(stats) => {
@@ -339,16 +407,33 @@ fn payload_len(message: &Message) -> u64 {
 }
 
 fn shape_payload_len(shape: &Shape) -> u64 {
-    let v = shape.mesh.vertices.len() as u64;
-    let t = shape.mesh.triangles.len() as u64;
-    SHAPE_HEADER_BYTES as u64
-        + match shape.encoding {
-            Encoding::Full => v * VERTEX_BYTES as u64 + t * TRIANGLE_BYTES as u64,
-            Encoding::Compact => {
-                let index_bytes = compact_index_bytes(shape.mesh.vertices.len()) as u64;
-                BOX_BYTES as u64 + v * COMPACT_VERTEX_BYTES as u64 + t * 3 * index_bytes
-            }
+    SHAPE_HEADER_BYTES as u64 + geometry_len(&shape.mesh, shape.encoding)
+}
+
+/// Bytes of a mesh's vertices and triangles in `encoding` (the box included when compact).
+fn geometry_len(mesh: &TriMesh, encoding: Encoding) -> u64 {
+    let v = mesh.vertices.len() as u64;
+    let t = mesh.triangles.len() as u64;
+    match encoding {
+        Encoding::Full => v * VERTEX_BYTES as u64 + t * TRIANGLE_BYTES as u64,
+        Encoding::Compact => {
+            let index_bytes = compact_index_bytes(mesh.vertices.len()) as u64;
+            BOX_BYTES as u64 + v * COMPACT_VERTEX_BYTES as u64 + t * 3 * index_bytes
         }
+    }
+}
+
+fn body_payload_len(body: &Body) -> u64 {
+    let hulls: u64 = body
+        .hulls
+        .iter()
+        .map(|h| {
+            (HULL_HEADER_BYTES
+                + h.vertices.len() * VERTEX_BYTES
+                + h.triangles.len() * HULL_TRIANGLE_BYTES) as u64
+        })
+        .sum();
+    BODY_HEADER_BYTES as u64 + geometry_len(&body.mesh, body.encoding) + 1 + hulls
 }
 
 // ---- payload writers -----------------------------------------------------------------------------
@@ -370,6 +455,7 @@ fn write_payload(message: &Message, out: &mut Vec<u8>) -> Result<(), WireError> 
             check_pose(pose, "Pose")?;
             write_pose(pose, out);
         }
+        Message::Body(body) => write_body(body, out)?,
         Message::Remove { object_id } => out.extend_from_slice(&object_id.to_le_bytes()),
         Message::SnapshotDone | Message::SubscribeV1 => {}
         Message::Stats(stats) => write_stats(stats, out)?,
@@ -429,29 +515,37 @@ fn write_pose(pose: &Pose, out: &mut Vec<u8>) {
     write_f32s(out, &pose.angular_velocity.to_array());
 }
 
+/// Checks a mesh for the wire: finite vertices, indices below the vertex count, and a box the
+/// compact encoding can hold. Returns that box when `encoding` is compact.
+fn check_geometry(mesh: &TriMesh, encoding: Encoding) -> Result<Option<CompactBox>, WireError> {
+    for (vertex, &p) in mesh.vertices.iter().enumerate() {
+        check_vertex(vertex, p)?;
+    }
+    for (triangle, &corners) in mesh.triangles.iter().enumerate() {
+        check_triangle(triangle, corners, mesh.vertices.len())?;
+    }
+    match encoding {
+        Encoding::Full => Ok(None),
+        Encoding::Compact => {
+            let compact_box = CompactBox::of(&mesh.vertices);
+            compact_box.check_encodable()?;
+            Ok(Some(compact_box))
+        }
+    }
+}
+
 fn write_shape(shape: &Shape, out: &mut Vec<u8>) -> Result<(), WireError> {
     // Every check first, so that the writing below cannot fail halfway.
     check_pose(&shape.pose, "Shape")?;
     check_flags("Shape", "flags", shape.flags, SHAPE_FLAGS)?;
     check_number("max_residual_m", shape.report.max_residual_m)?;
-    let TriMesh {
-        vertices,
-        triangles,
-    } = &shape.mesh;
-    for (vertex, &p) in vertices.iter().enumerate() {
-        check_vertex(vertex, p)?;
-    }
-    for (triangle, &corners) in triangles.iter().enumerate() {
-        check_triangle(triangle, corners, vertices.len())?;
-    }
-    let (compact_box, max_residual_m) = match shape.encoding {
-        Encoding::Full => (None, shape.report.max_residual_m),
-        Encoding::Compact => {
-            let compact_box = CompactBox::of(vertices);
-            compact_box.check_encodable()?;
+    let compact_box = check_geometry(&shape.mesh, shape.encoding)?;
+    let max_residual_m = match &compact_box {
+        None => shape.report.max_residual_m,
+        Some(compact_box) => {
             let residual = shape.report.max_residual_m + compact_box.quantisation_bound_m();
             check_number("max_residual_m", residual)?;
-            (Some(compact_box), residual)
+            residual
         }
     };
 
@@ -462,7 +556,23 @@ fn write_shape(shape: &Shape, out: &mut Vec<u8>) -> Result<(), WireError> {
     out.extend_from_slice(&shape.report.faces_in.to_le_bytes());
     out.extend_from_slice(&shape.report.faces_out.to_le_bytes());
     out.extend_from_slice(&max_residual_m.to_le_bytes());
-    out.push(shape.encoding.byte());
+    write_geometry(&shape.mesh, shape.encoding, compact_box, out);
+    Ok(())
+}
+
+/// The encoding byte, the two counts and the geometry of a checked mesh (Shape's layout, also
+/// a Body's proxy's).
+fn write_geometry(
+    mesh: &TriMesh,
+    encoding: Encoding,
+    compact_box: Option<CompactBox>,
+    out: &mut Vec<u8>,
+) {
+    let TriMesh {
+        vertices,
+        triangles,
+    } = mesh;
+    out.push(encoding.byte());
     // The frame cap, checked before writing, keeps both counts below 2^32.
     out.extend_from_slice(&(vertices.len() as u32).to_le_bytes());
     out.extend_from_slice(&(triangles.len() as u32).to_le_bytes());
@@ -496,6 +606,71 @@ fn write_shape(shape: &Shape, out: &mut Vec<u8>) -> Result<(), WireError> {
                     }
                 }
             }
+        }
+    }
+}
+
+/// The inertia entries in wire order: `ixx, iyy, izz, ixy, ixz, iyz`.
+pub(crate) fn inertia_entries(inertia: &[[f32; 3]; 3]) -> [f32; 6] {
+    [
+        inertia[0][0],
+        inertia[1][1],
+        inertia[2][2],
+        inertia[0][1],
+        inertia[0][2],
+        inertia[1][2],
+    ]
+}
+
+/// Checks a hull's size, vertices and indices.
+pub(crate) fn check_hull(object_id: u64, index: usize, hull: &Hull) -> Result<(), WireError> {
+    check_hull_size(object_id, index, hull.vertices.len(), hull.triangles.len())?;
+    for (vertex, &p) in hull.vertices.iter().enumerate() {
+        check_vertex(vertex, p)?;
+    }
+    for (triangle, corners) in hull.triangles.iter().enumerate() {
+        check_triangle(triangle, corners.map(u32::from), hull.vertices.len())?;
+    }
+    Ok(())
+}
+
+fn write_body(body: &Body, out: &mut Vec<u8>) -> Result<(), WireError> {
+    // Every check first, so that the writing below cannot fail halfway.
+    let inertia = inertia_entries(&body.inertia);
+    check_number("margin_m", body.margin_m)?;
+    check_finite("Body", "centre_of_mass", &body.centre_of_mass.to_array())?;
+    check_finite("Body", "inertia", &inertia)?;
+    check_body_proxy(
+        body.object_id,
+        body.proxy,
+        body.volume_m3,
+        body.mesh.vertices.len(),
+        body.mesh.triangles.len(),
+    )?;
+    let compact_box = check_geometry(&body.mesh, body.encoding)?;
+    check_hull_count(body.object_id, body.hulls.len())?;
+    for (index, hull) in body.hulls.iter().enumerate() {
+        check_hull(body.object_id, index, hull)?;
+    }
+
+    out.extend_from_slice(&body.object_id.to_le_bytes());
+    out.extend_from_slice(&body.shape_version.to_le_bytes());
+    out.push(body.proxy.byte());
+    out.extend_from_slice(&body.margin_m.to_le_bytes());
+    out.extend_from_slice(&body.volume_m3.to_le_bytes());
+    write_f32s(out, &body.centre_of_mass.to_array());
+    write_f32s(out, &inertia);
+    write_geometry(&body.mesh, body.encoding, compact_box, out);
+    // At most MAX_HULLS, checked; each hull's counts fit their fields, checked.
+    out.push(body.hulls.len() as u8);
+    for hull in &body.hulls {
+        out.push(hull.vertices.len() as u8);
+        out.extend_from_slice(&(hull.triangles.len() as u16).to_le_bytes());
+        for p in &hull.vertices {
+            write_f32s(out, &p.to_array());
+        }
+        for corners in &hull.triangles {
+            out.extend_from_slice(corners);
         }
     }
     Ok(())
@@ -611,6 +786,7 @@ mod compact_tests {
         assert_eq!(SHAPE_HEADER_BYTES + BOX_BYTES, 154);
         assert_eq!(SUBSCRIBE_FIXED_BYTES, 11);
         assert_eq!(STATS_HEADER_BYTES, 168);
+        assert_eq!(BODY_HEADER_BYTES, 70);
     }
 
     #[test]

@@ -77,16 +77,52 @@ pub enum WireError {
     },
 
     #[error(
-        "`kinds` of {message} is 0: it must ask for objects (bit 0), support planes (bit 1) \
-         or both"
+        "`kinds` of {message} asks for neither objects (bit 0) nor support planes (bit 1): it \
+         must ask for one of them or both (bit 2, bodies, comes with the objects)"
     )]
     NoKinds { message: &'static str },
 
-    #[error("`{field}` of {message} is {value}, which is not a defined value (0 full, 1 compact)")]
+    #[error("`{field}` of {message} is {value}, which is not a defined value ({defined})")]
     InvalidEnum {
         message: &'static str,
         field: &'static str,
         value: u8,
+        /// The values the field may have, for a human.
+        defined: &'static str,
+    },
+
+    #[error(
+        "the body of object {object_id} has volume {volume_m3} m³: it must be finite and positive"
+    )]
+    BodyVolume { object_id: u64, volume_m3: f32 },
+
+    #[error(
+        "the body of object {object_id} says its shape is its proxy, yet carries a proxy mesh of \
+         {vertex_count} vertices and {triangle_count} triangles (it must carry none)"
+    )]
+    ProxyMeshNotEmpty {
+        object_id: u64,
+        vertex_count: usize,
+        triangle_count: usize,
+    },
+
+    #[error("the body of object {object_id} has {count} hulls, more than the cap of {max}")]
+    TooManyHulls {
+        object_id: u64,
+        count: usize,
+        max: usize,
+    },
+
+    #[error(
+        "hull {hull} of object {object_id}'s body has {vertex_count} vertices and \
+         {triangle_count} triangles: a hull has 4 to 255 vertices and at most twice as many \
+         triangles"
+    )]
+    BadHull {
+        object_id: u64,
+        hull: usize,
+        vertex_count: usize,
+        triangle_count: usize,
     },
 
     #[error(

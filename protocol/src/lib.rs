@@ -1,10 +1,10 @@
-//! The tacmesh wire protocol, version 2: the messages the daemon publishes on its Unix socket
+//! The tacmesh wire protocol, version 3: the messages the daemon publishes on its Unix socket
 //! and the few a subscriber may send back, as bytes. No I/O here: the daemon and clients own
 //! their sockets and hand bytes to [`encode`] and a [`FrameDecoder`]. The byte layout is
 //! specified in `docs/protocol.md`; the golden-byte tests in this crate pin it down.
 //!
 //! Entry points:
-//! - [`Message`]: every message, with [`Session`], [`Shape`], [`Pose`], [`Stats`],
+//! - [`Message`]: every message, with [`Session`], [`Shape`], [`Pose`], [`Body`], [`Stats`],
 //!   [`Subscribe`] and their parts.
 //! - [`encode`]: one message to one frame, appended to a buffer; a [`Shape`] in the
 //!   [`Encoding`] it names.
@@ -29,10 +29,10 @@ pub use decode::FrameDecoder;
 pub use encode::encode;
 pub use error::WireError;
 pub use message::{
-    check_hello, quantisation_bound_m, Encoding, Kinds, Message, Pose, Sender, Session, Shape,
-    SimplifyStats, StageLatency, Stats, Subscribe, EXTRAPOLATION_REFRESH,
+    check_hello, quantisation_bound_m, Body, BodyProxy, Encoding, Hull, Kinds, Message, Pose,
+    Sender, Session, Shape, SimplifyStats, StageLatency, Stats, Subscribe, EXTRAPOLATION_REFRESH,
     EXTRAPOLATION_TOLERANCE_M, EXTRAPOLATION_TOLERANCE_RAD, FIRST_SUPPORT_ID, MAX_FRAME_BYTES,
-    MAX_NAME_BYTES, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, PROTOCOL_VERSION, SHAPE_CLOSED,
-    SHAPE_SUPPORT,
+    MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS,
+    MIN_HULL_VERTICES, PROTOCOL_VERSION, SHAPE_CLOSED, SHAPE_NEW_FRAME, SHAPE_SUPPORT,
 };
 pub use scene::{Scene, SceneChange, SceneObject};

@@ -8,8 +8,9 @@ use crate::error::WireError;
 /// format bumps it: a new message kind (existing layouts untouched, so a newer client can still
 /// read an older server) or a changed layout (see `docs/protocol.md`, "Versioning").
 /// Version 2 put each object's shape in its own frame with a pose, so that a move is a
-/// [`Pose`] of under 100 bytes instead of a whole mesh.
-pub const PROTOCOL_VERSION: u16 = 2;
+/// [`Pose`] of under 100 bytes instead of a whole mesh; version 3 added each object's collision
+/// body ([`Body`]: a closed proxy, convex parts, mass properties).
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// The largest frame either side sends or accepts, counted as the value of the length prefix
 /// (message kind byte plus payload, not the 4 prefix bytes): 64 MiB. A simplified object mesh is
@@ -26,6 +27,15 @@ pub const MAX_REASON_BYTES: usize = 1024;
 
 /// The most object ids a [`Subscribe`] may list.
 pub const MAX_SUBSCRIBE_IDS: usize = 1024;
+
+/// The most convex hulls a [`Body`] may have.
+pub const MAX_HULLS: usize = 16;
+
+/// The most vertices one hull of a [`Body`] may have (its indices are one byte).
+pub const MAX_HULL_VERTICES: usize = 255;
+
+/// The fewest vertices a hull has: a tetrahedron's.
+pub const MIN_HULL_VERTICES: usize = 4;
 
 /// Who sends a message kind. Kinds `0x01..=0x7f` are sent by the server (the daemon), kinds
 /// `0x80..=0xff` by a client; `0x00` is never valid.
@@ -56,6 +66,7 @@ pub(crate) mod kind {
     pub const SHAPE: u8 = 0x08;
     pub const POSE: u8 = 0x09;
     pub const STATS: u8 = 0x0a;
+    pub const BODY: u8 = 0x0b;
     pub const SUBSCRIBE_V1: u8 = 0x80;
     pub const SUBSCRIBE: u8 = 0x81;
 
@@ -70,6 +81,7 @@ pub(crate) mod kind {
             SHAPE => "Shape",
             POSE => "Pose",
             STATS => "Stats",
+            BODY => "Body",
             SUBSCRIBE_V1 => "Subscribe (version 1)",
             SUBSCRIBE => "Subscribe",
             _ => return None,
@@ -93,6 +105,8 @@ pub enum Message {
     Shape(Shape),
     /// Server → client: an object's new pose (its shape unchanged), or that it was seen again.
     Pose(Pose),
+    /// Server → client: an object's collision body, made from one of its shapes.
+    Body(Body),
     /// Server → client: the object is gone; forget it.
     Remove { object_id: u64 },
     /// Server → client: every object of the snapshot has been sent.
@@ -141,6 +155,7 @@ impl Message {
             Message::Session(_) => kind::SESSION,
             Message::Shape(_) => kind::SHAPE,
             Message::Pose(_) => kind::POSE,
+            Message::Body(_) => kind::BODY,
             Message::Remove { .. } => kind::REMOVE,
             Message::SnapshotDone => kind::SNAPSHOT_DONE,
             Message::Stats(_) => kind::STATS,
@@ -194,7 +209,8 @@ pub fn quantisation_bound_m(min: glam::Vec3, max: glam::Vec3) -> f32 {
         + rounding * (3.0 * extent.length() + min.abs().max(max.abs()).length())
 }
 
-/// Which objects a client is sent, by kind: [`Kinds::OBJECTS`], [`Kinds::SUPPORTS`] or both.
+/// What a client is sent: which objects by kind ([`Kinds::OBJECTS`], [`Kinds::SUPPORTS`] or
+/// both), and whether the objects' collision bodies too ([`Kinds::BODIES`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Kinds(pub(crate) u8);
 
@@ -203,12 +219,14 @@ impl Kinds {
     pub const OBJECTS: Kinds = Kinds(1);
     /// Support planes: tables, floors (ids from 2^32).
     pub const SUPPORTS: Kinds = Kinds(2);
-    pub const ALL: Kinds = Kinds(3);
+    /// The [`Body`] of each object sent.
+    pub const BODIES: Kinds = Kinds(4);
+    pub const ALL: Kinds = Kinds(7);
 
-    /// The kinds in `bits` (bit 0 objects, bit 1 supports), or `None` for no kind or an
-    /// unknown bit.
+    /// The kinds in `bits` (bit 0 objects, bit 1 supports, bit 2 bodies), or `None` when
+    /// neither objects nor supports are asked for or a bit is unknown.
     pub fn from_bits(bits: u8) -> Option<Self> {
-        (bits != 0 && bits & !3 == 0).then_some(Kinds(bits))
+        (bits & 3 != 0 && bits & !7 == 0).then_some(Kinds(bits))
     }
 
     pub fn bits(self) -> u8 {
@@ -217,6 +235,11 @@ impl Kinds {
 
     pub fn contains(self, other: Kinds) -> bool {
         self.0 & other.0 == other.0
+    }
+
+    /// These kinds without `other`'s bits, or `None` when no object kind would be left.
+    pub fn without(self, other: Kinds) -> Option<Kinds> {
+        Kinds::from_bits(self.0 & !other.0)
     }
 }
 
@@ -341,6 +364,9 @@ pub const SHAPE_CLOSED: u8 = 1;
 /// A shape flag: the object is a support plane (a table, a floor), its fan facing the side the
 /// sensor saw it from.
 pub const SHAPE_SUPPORT: u8 = 2;
+/// A shape flag: the object's frame is not the one its earlier shapes were in, so a [`Body`]
+/// made from an earlier shape does not fit this one.
+pub const SHAPE_NEW_FRAME: u8 = 4;
 
 /// A new shape of one object (in its own frame) and the pose that places it.
 #[derive(Debug, Clone, PartialEq)]
@@ -391,6 +417,93 @@ impl Shape {
     pub fn is_support(&self) -> bool {
         self.flags & SHAPE_SUPPORT != 0
     }
+
+    pub fn is_new_frame(&self) -> bool {
+        self.flags & SHAPE_NEW_FRAME != 0
+    }
+}
+
+/// How a [`Body`]'s collision proxy was made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BodyProxy {
+    /// The shape is closed and is its own proxy; the body carries no proxy mesh.
+    Shape,
+    /// The open shell swept away from the sensor along its rays to the support plane.
+    ShadowVolume,
+    /// The open shell swept straight down onto the support plane (no sensor position known).
+    Extrusion,
+}
+
+impl BodyProxy {
+    pub(crate) fn byte(self) -> u8 {
+        match self {
+            BodyProxy::Shape => 0,
+            BodyProxy::ShadowVolume => 1,
+            BodyProxy::Extrusion => 2,
+        }
+    }
+
+    pub(crate) fn from_byte(byte: u8) -> Option<Self> {
+        match byte {
+            0 => Some(BodyProxy::Shape),
+            1 => Some(BodyProxy::ShadowVolume),
+            2 => Some(BodyProxy::Extrusion),
+            _ => None,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            BodyProxy::Shape => "shape",
+            BodyProxy::ShadowVolume => "shadow volume",
+            BodyProxy::Extrusion => "extrusion",
+        }
+    }
+}
+
+/// One convex part of a [`Body`]: at most [`MAX_HULL_VERTICES`] vertices (at least
+/// [`MIN_HULL_VERTICES`]) and its faces, counter-clockwise seen from outside.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hull {
+    pub vertices: Vec<glam::Vec3>,
+    pub triangles: Vec<[u8; 3]>,
+}
+
+impl Hull {
+    /// The hull as a mesh.
+    pub fn mesh(&self) -> TriMesh {
+        TriMesh::new(
+            self.vertices.clone(),
+            self.triangles.iter().map(|t| t.map(u32::from)).collect(),
+        )
+    }
+}
+
+/// An object's collision body, made from the shape whose version it names (its vertices are
+/// in that shape's frame, placed by the object's pose): a closed collision proxy, the convex
+/// parts covering it, and its mass properties for a density of 1 kg/m³.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Body {
+    pub object_id: u64,
+    /// The version of the shape it was made from.
+    pub shape_version: u64,
+    pub proxy: BodyProxy,
+    /// How far the proxy was grown outward from the seen surface, metres.
+    pub margin_m: f32,
+    /// The proxy's volume, m³ (positive).
+    pub volume_m3: f32,
+    /// The proxy's centre of mass, object frame.
+    pub centre_of_mass: glam::Vec3,
+    /// The proxy's inertia tensor about its centre of mass, at unit density (kg·m² per kg/m³),
+    /// along the object frame's axes; symmetric (the wire carries its upper triangle).
+    pub inertia: [[f32; 3]; 3],
+    /// The proxy's surface, closed, counter-clockwise seen from outside; empty for
+    /// [`BodyProxy::Shape`] (the shape is the proxy).
+    pub mesh: TriMesh,
+    /// How `mesh` is (to be) laid out on the wire.
+    pub encoding: Encoding,
+    /// Convex parts whose union covers the proxy; at most [`MAX_HULLS`].
+    pub hulls: Vec<Hull>,
 }
 
 /// What simplification did to produce a shape's mesh.

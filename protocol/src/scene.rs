@@ -1,14 +1,15 @@
-//! What a client keeps of the stream: per object, the latest shape and the latest pose for it
-//! (`docs/protocol.md`, "The scene a client keeps"). Pure bookkeeping, no I/O: feed it every
+//! What a client keeps of the stream: per object, the latest shape, the latest pose for it and
+//! the latest collision body (`docs/protocol.md`, "The scene a client keeps"). Pure bookkeeping, no I/O: feed it every
 //! message a [`crate::FrameDecoder`] gives, in order, with [`Scene::apply`].
 
 use std::collections::BTreeMap;
 
 use tacmesh_source::TriMesh;
 
-use crate::message::{Kinds, Message, Pose, Session, Shape, Subscribe, FIRST_SUPPORT_ID};
+use crate::message::{Body, Kinds, Message, Pose, Session, Shape, Subscribe, FIRST_SUPPORT_ID};
 
-/// One object as the client knows it: its latest shape and the latest pose of that shape.
+/// One object as the client knows it: its latest shape, the latest pose of that shape, and its
+/// latest collision body.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SceneObject {
     /// The latest Shape (highest `shape_version`), as received; `shape.pose` is the pose it came
@@ -16,6 +17,9 @@ pub struct SceneObject {
     pub shape: Shape,
     /// The current pose: `world_from_object` for `shape`'s vertices.
     pub pose: Pose,
+    /// The newest Body (by `shape_version`), in the same frame as `shape` (a Shape with the
+    /// `new_frame` flag drops an older one), placed by `pose` too; `None` until one comes.
+    pub body: Option<Body>,
 }
 
 impl SceneObject {
@@ -50,12 +54,15 @@ pub enum SceneChange {
     Reshaped(u64),
     /// A Pose of the held shape, no older than the held pose: pose replaced.
     Moved(u64),
+    /// A Body of a held object, no older than its held body: body replaced.
+    Bodied(u64),
     /// A Remove of a held object: forgotten.
     Removed(u64),
     /// SnapshotDone: the scene is the server's whole view as of the last Session.
     SnapshotDone,
-    /// A Shape older than the held one, or a Pose of another shape version than the held one,
-    /// of an object not held, or older than the held pose: ignored (see "Only the latest").
+    /// A Shape older than the held one, a Pose of another shape version than the held one or
+    /// older than the held pose, a Body older than the held one, or a Pose or Body of an
+    /// object not held: ignored (see "Only the latest").
     Stale(u64),
     /// Nothing changed: a message that carries no scene (Hello, Stats, Goodbye, the client
     /// kinds), or a Remove of an object the scene does not hold.
@@ -92,6 +99,7 @@ impl Scene {
             }
             Message::Shape(shape) => self.apply_shape(shape),
             Message::Pose(pose) => self.apply_pose(pose),
+            Message::Body(body) => self.apply_body(body),
             Message::Remove { object_id } => match self.objects.remove(object_id) {
                 Some(_) => SceneChange::Removed(*object_id),
                 None => SceneChange::Unchanged,
@@ -116,6 +124,7 @@ impl Scene {
                 SceneObject {
                     shape: shape.clone(),
                     pose: shape.pose,
+                    body: None,
                 },
             );
             return SceneChange::Added(id);
@@ -127,7 +136,29 @@ impl Scene {
         }
         held.shape = shape.clone();
         held.pose = shape.pose;
+        if shape.is_new_frame() {
+            held.body = held
+                .body
+                .take()
+                .filter(|body| body.shape_version >= shape.version());
+        }
         SceneChange::Reshaped(id)
+    }
+
+    fn apply_body(&mut self, body: &Body) -> SceneChange {
+        let id = body.object_id;
+        match self.objects.get_mut(&id) {
+            Some(held)
+                if held
+                    .body
+                    .as_ref()
+                    .is_none_or(|b| body.shape_version >= b.shape_version) =>
+            {
+                held.body = Some(body.clone());
+                SceneChange::Bodied(id)
+            }
+            _ => SceneChange::Stale(id),
+        }
     }
 
     fn apply_pose(&mut self, pose: &Pose) -> SceneChange {
@@ -145,9 +176,14 @@ impl Scene {
 
     /// Forgets the objects a new Subscribe's filter leaves out, as a client does when it
     /// narrows its subscription without asking for a resend (the server sends nothing more
-    /// about them, not even a Remove). Objects have ids below [`FIRST_SUPPORT_ID`], support
-    /// planes from it.
+    /// about them, not even a Remove), and their bodies when it no longer asks for bodies.
+    /// Objects have ids below [`FIRST_SUPPORT_ID`], support planes from it.
     pub fn retain_subscribed(&mut self, options: &Subscribe) {
+        if !options.kinds.contains(Kinds::BODIES) {
+            for object in self.objects.values_mut() {
+                object.body = None;
+            }
+        }
         self.objects.retain(|&id, _| {
             let kind = if id < FIRST_SUPPORT_ID {
                 Kinds::OBJECTS

@@ -7,6 +7,8 @@ use tacmesh_source::TriMesh;
 
 use crate::*;
 
+mod body;
+
 // ---- helpers -------------------------------------------------------------------------------------
 
 fn encoded(message: &Message) -> Vec<u8> {
@@ -342,6 +344,8 @@ fn server_messages() -> Vec<Message> {
         Message::Shape(empty),
         Message::Pose(example_pose()),
         Message::Pose(far_pose),
+        Message::Body(body::example_body(Encoding::Full)),
+        Message::Body(body::shape_body()),
         Message::Remove { object_id: 42 },
         Message::SnapshotDone,
         Message::Stats(stats),
@@ -435,7 +439,7 @@ fn hello_golden_bytes() {
     let expected: [u8; 16] = [
         0x0c, 0x00, 0x00, 0x00,                   // length 12
         0x01,                                     // kind Hello
-        0x02, 0x00,                               // protocol_version 2
+        0x03, 0x00,                               // protocol_version 3
         0x07, 0x00,                               // server: 7 bytes
         b't', b'a', b'c', b'm', b'e', b's', b'h', // "tacmesh"
     ];
@@ -485,7 +489,7 @@ fn subscribe_golden_bytes() {
         0x01,                   // encoding compact
         0x01,                   // flags: resend
         0x00, 0x00, 0x20, 0x41, // max_rate_hz 10
-        0x03,                   // kinds: objects and supports
+        0x07,                   // kinds: objects, supports and bodies
         0x00, 0x00, 0x00, 0x00, // id_count 0: all objects
     ];
     let message = Message::Subscribe(sample_subscribe());
@@ -560,7 +564,7 @@ fn session_and_stats_fields_sit_at_their_documented_offsets() {
     let options = 5 + at::SESSION_OPTIONS;
     assert_eq!(
         session[options..options + 11],
-        [0x01, 0x01, 0x00, 0x00, 0x20, 0x41, 0x03, 0x01, 0x00, 0x00, 0x00]
+        [0x01, 0x01, 0x00, 0x00, 0x20, 0x41, 0x07, 0x01, 0x00, 0x00, 0x00]
     );
     assert_eq!(session[options + 11..options + 13], [0x33, 0x33]);
 
@@ -814,16 +818,16 @@ fn decoder_skips_a_bad_frame_and_reads_the_next() {
 }
 
 #[test]
-fn check_hello_accepts_version_2_only() {
+fn check_hello_accepts_version_3_only() {
     assert_eq!(check_hello(&Message::hello("tacmesh")), Ok(()));
-    for theirs in [1, 3] {
+    for theirs in [1, 2, 4] {
         let err = check_hello(&Message::Hello {
             protocol_version: theirs,
             server: "other".into(),
         })
         .expect_err("another version");
-        assert_eq!(err, WireError::VersionMismatch { ours: 2, theirs });
-        assert!(err.to_string().contains("speaks only version 2"), "{err}");
+        assert_eq!(err, WireError::VersionMismatch { ours: 3, theirs });
+        assert!(err.to_string().contains("speaks only version 3"), "{err}");
     }
     assert_eq!(
         check_hello(&Message::SnapshotDone),
@@ -897,7 +901,7 @@ fn wire_rejects_empty_frame() {
 #[test]
 fn wire_rejects_unknown_and_retired_kinds() {
     // 0x02 and 0x05 are version 1's Upsert and Stats, retired.
-    for kind in [0x00, 0x02, 0x05, 0x0b, 0x7f, 0x82, 0xff] {
+    for kind in [0x00, 0x02, 0x05, 0x0c, 0x7f, 0x82, 0xff] {
         for from in [Sender::Server, Sender::Client] {
             let err = decode_err(&frame(kind, &[1, 2, 3]), from);
             assert_eq!(err, WireError::UnknownKind { kind });
@@ -1107,16 +1111,16 @@ fn wire_rejects_too_many_ids() {
 fn wire_rejects_undefined_flags() {
     let shape = encoded(&Message::Shape(example_shape(Encoding::Full)));
     assert_eq!(
-        decode_err(&patched(&shape, at::SHAPE_FLAGS, &[0x04]), Sender::Server),
+        decode_err(&patched(&shape, at::SHAPE_FLAGS, &[0x08]), Sender::Server),
         WireError::InvalidFlags {
             message: "Shape",
             field: "flags",
-            value: 0x04,
-            defined: 0x03
+            value: 0x08,
+            defined: 0x07
         }
     );
-    // Both defined bits together are fine.
-    assert!(decode_one(&patched(&shape, at::SHAPE_FLAGS, &[0x03]), Sender::Server).is_ok());
+    // The three defined bits together are fine.
+    assert!(decode_one(&patched(&shape, at::SHAPE_FLAGS, &[0x07]), Sender::Server).is_ok());
 
     let subscribe = encoded(&Message::Subscribe(sample_subscribe()));
     let err = decode_err(
@@ -1140,9 +1144,17 @@ fn wire_rejects_undefined_flags() {
     )
     .is_ok());
     assert!(matches!(
-        decode_err(&patched(&subscribe, at::KINDS, &[0x07]), Sender::Client),
+        decode_err(&patched(&subscribe, at::KINDS, &[0x0b]), Sender::Client),
         WireError::InvalidFlags { field: "kinds", .. }
     ));
+    // Bodies alone ask for no object: refused like no kind at all.
+    assert_eq!(
+        decode_err(&patched(&subscribe, at::KINDS, &[0x04]), Sender::Client),
+        WireError::NoKinds {
+            message: "Subscribe"
+        }
+    );
+    assert!(decode_one(&patched(&subscribe, at::KINDS, &[0x05]), Sender::Client).is_ok());
     assert_eq!(
         decode_err(&patched(&subscribe, at::KINDS, &[0x00]), Sender::Client),
         WireError::NoKinds {
@@ -1167,7 +1179,8 @@ fn wire_rejects_undefined_encoding() {
         WireError::InvalidEnum {
             message: "Shape",
             field: "encoding",
-            value: 2
+            value: 2,
+            defined: "0 full, 1 compact",
         }
     );
     let subscribe = encoded(&Message::Subscribe(sample_subscribe()));
@@ -1179,7 +1192,8 @@ fn wire_rejects_undefined_encoding() {
         WireError::InvalidEnum {
             message: "Subscribe",
             field: "encoding",
-            value: 0xff
+            value: 0xff,
+            defined: "0 full, 1 compact",
         }
     );
 }
@@ -1481,7 +1495,7 @@ fn encode_refuses_what_decode_would_refuse_and_leaves_out_untouched() {
                 message: "Shape",
                 field: "flags",
                 value: 0x84,
-                defined: 0x03,
+                defined: 0x07,
             },
         ),
         (
@@ -1565,7 +1579,7 @@ fn encode_refuses_what_decode_would_refuse_and_leaves_out_untouched() {
                 message: "Subscribe",
                 field: "kinds",
                 value: 0x0b,
-                defined: 0x03,
+                defined: 0x07,
             },
         ),
         (
