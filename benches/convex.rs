@@ -318,4 +318,47 @@ fn main() {
             ),
         );
     }
+    isolated(&meshes);
+}
+
+/// The daemon runs V-HACD in a child process (`tacmesh::isolated_vhacd`), so that a panic in
+/// parry cannot abort it: what that costs against running it in the process, on the shapes
+/// that need V-HACD, and that the hulls are the same.
+fn isolated(meshes: &[(Shape, TriMesh)]) {
+    use tacmesh::isolated_vhacd::{decompose, CHILD_TIMEOUT};
+    use tacmesh::physics::{convex_parts_with, Decomposition};
+    let exe = Path::new(env!("CARGO_BIN_EXE_tacmesh"));
+    let config = ConvexConfig::default();
+    println!("\n### V-HACD in a child process (the daemon's way) against in the process\n");
+    println!("| shape | ms in the process | ms in a child process | same hulls |");
+    println!("|---|---|---|---|");
+    for (shape, mesh) in meshes {
+        let median_ms = |run: &dyn Fn() -> Vec<TriMesh>| {
+            let mut times = Vec::with_capacity(REPS);
+            let mut hulls = Vec::new();
+            for _ in 0..REPS {
+                let start = Instant::now();
+                hulls = run();
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            times.sort_by(f64::total_cmp);
+            (times[REPS / 2], hulls)
+        };
+        let parts = convex_parts(mesh, &config).expect("pipeline meshes are closed solids");
+        if !matches!(parts.decomposition, Decomposition::Vhacd { .. }) {
+            continue;
+        }
+        let (inside_ms, inside) =
+            median_ms(&|| convex_parts(mesh, &config).expect("a closed solid").hulls);
+        let (child_ms, child) = median_ms(&|| {
+            convex_parts_with(mesh, &config, |m, c| decompose(exe, m, c, CHILD_TIMEOUT))
+                .expect("a closed solid")
+                .hulls
+        });
+        println!(
+            "| {} | {inside_ms:.0} | {child_ms:.0} | {} |",
+            shape.name(),
+            if inside == child { "yes" } else { "no" }
+        );
+    }
 }

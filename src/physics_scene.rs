@@ -2,20 +2,23 @@
 //! object a moving body with convex collision parts and mass properties, each support plane a
 //! plane, gravity towards the largest support.
 //!
-//! Each object's collision parts come from its published shape: a closed shape is decomposed as
-//! it is; an open one (a one-view shell) is first closed into a proxy, extruded straight down
-//! onto the support it stands on (the subscriber knows neither the sensor's position nor what
-//! it saw as empty, so it cannot sweep the shell along the sensor's rays as the daemon could)
-//! and grown by the shape's residual. The parts are recomputed only when an object's shape
-//! version changes: a move only moves the body.
+//! Each object's collision parts are its published Body's (docs/protocol.md: the daemon's
+//! proxy, swept along the sensor's rays, its convex hulls and mass properties) when it has
+//! one. Until it does (a daemon that sends none, a body still being made), they come from its
+//! published shape: a closed shape is decomposed as it is; an open one (a one-view shell) is
+//! first closed into a proxy, extruded straight down onto the support it stands on (the
+//! subscriber knows neither the sensor's position nor what it saw as empty, so it cannot sweep
+//! the shell along the sensor's rays as the daemon does) and grown by the shape's residual.
+//! The parts are recomputed only when an object's shape or body changes: a move only moves the
+//! body.
 
 use std::collections::HashMap;
 
 use glam::{Affine3A, Vec3};
 use tacmesh_physics::mjcf::{Motion, Scene as MjcfScene, SceneBody, ScenePlane, WorldFromBody};
 use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
-use tacmesh_physics::{convex_parts, ConvexConfig, MassProperties};
-use tacmesh_protocol::{Scene, SceneObject};
+use tacmesh_physics::{convex_parts, ConvexConfig, MassProperties, WorldSupport};
+use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
 
 use crate::daemon::planes::FIRST_PLANE_ID;
@@ -23,9 +26,11 @@ use crate::daemon::planes::FIRST_PLANE_ID;
 /// Standard gravity, m/s².
 const GRAVITY_M_S2: f32 = 9.806_65;
 
-/// An object's collision parts, for one shape version.
+/// An object's collision parts, for one shape version and body.
 struct Collision {
     shape_version: u64,
+    /// The shape version of the published Body they are, or `None` when made here.
+    body_version: Option<u64>,
     /// The parts and their mass, or why there are none.
     parts: Result<(Vec<TriMesh>, MassProperties, ProxyKind), String>,
 }
@@ -41,46 +46,14 @@ pub struct PhysicsUpdate {
     pub scene: MjcfScene,
     /// Objects whose collision parts were (re)computed in this update.
     pub decomposed: usize,
+    /// Objects whose collision parts are their published Body's.
+    pub from_bodies: usize,
     /// Objects left out, with why (a shape too flat or small to hold a volume).
     pub left_out: Vec<(u64, String)>,
 }
 
-/// A support plane of the scene in the world: a point on it, its unit normal (towards the
-/// side the published fan faces, where the objects stand) and its area.
-struct WorldSupport {
-    object_id: u64,
-    point: Vec3,
-    normal: Vec3,
-    area_m2: f32,
-    half_size_m: f32,
-}
-
 fn world_support(object: &SceneObject) -> Option<WorldSupport> {
-    let mesh = object.world_mesh();
-    let mut area_normal = Vec3::ZERO;
-    let mut centre = Vec3::ZERO;
-    let mut area = 0.0;
-    for t in &mesh.triangles {
-        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-        let n = (b - a).cross(c - a);
-        area_normal += n;
-        area += 0.5 * n.length();
-        centre += 0.5 * n.length() * (a + b + c) / 3.0;
-    }
-    let normal = area_normal.try_normalize()?;
-    let point = centre / area;
-    let half_size_m = mesh
-        .vertices
-        .iter()
-        .map(|v| v.distance(point))
-        .fold(0.0f32, f32::max);
-    Some(WorldSupport {
-        object_id: object.object_id(),
-        point,
-        normal,
-        area_m2: area,
-        half_size_m,
-    })
+    WorldSupport::of_fan(object.object_id(), &object.world_mesh())
 }
 
 impl PhysicsScene {
@@ -106,6 +79,7 @@ impl PhysicsScene {
         self.collisions
             .retain(|id, _| scene.get(*id).is_some_and(|o| !o.shape.is_support()));
         let mut decomposed = 0;
+        let mut from_bodies = 0;
         let mut left_out = Vec::new();
         let mut bodies = Vec::new();
         let mut objects: Vec<&SceneObject> =
@@ -114,20 +88,30 @@ impl PhysicsScene {
         for object in objects {
             let id = object.object_id();
             let world_from_object = object.pose.world_from_object();
-            let stale = self
-                .collisions
-                .get(&id)
-                .is_none_or(|c| c.shape_version != object.shape.version());
+            let body_version = object.body.as_ref().map(|b| b.shape_version);
+            let stale = self.collisions.get(&id).is_none_or(|c| {
+                c.shape_version != object.shape.version() || c.body_version != body_version
+            });
             if stale {
-                decomposed += 1;
-                let support = support_under(&supports, object, world_from_object);
+                let parts = match &object.body {
+                    Some(body) => Ok(published_parts(body)),
+                    None => {
+                        decomposed += 1;
+                        let support = support_under(&supports, object, world_from_object);
+                        collision_parts(object, support)
+                    }
+                };
                 self.collisions.insert(
                     id,
                     Collision {
                         shape_version: object.shape.version(),
-                        parts: collision_parts(object, support),
+                        body_version,
+                        parts,
                     },
                 );
+            }
+            if body_version.is_some() {
+                from_bodies += 1;
             }
             match &self.collisions[&id].parts {
                 Ok((parts, mass, _)) => bodies.push(SceneBody {
@@ -162,39 +146,35 @@ impl PhysicsScene {
                 bodies,
             },
             decomposed,
+            from_bodies,
             left_out,
         }
     }
 }
 
-/// The support an object stands on, in the object's frame: the one it is above and nearest to
-/// (by its lowest vertex along each support's normal).
+/// The support an object stands on, in the object's frame.
 fn support_under(
     supports: &[WorldSupport],
     object: &SceneObject,
     world_from_object: Affine3A,
 ) -> Option<SupportPlane> {
-    let world = object.world_mesh();
-    let nearest = supports
-        .iter()
-        .filter_map(|s| {
-            let lowest = world
-                .vertices
-                .iter()
-                .map(|v| s.normal.dot(*v - s.point))
-                .fold(f32::INFINITY, f32::min);
-            // Standing on it: its lowest point no more than a few centimetres under the plane
-            // (noise, and the segmentation's margin) and above it otherwise.
-            (lowest > -0.05).then_some((lowest, s))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))?
-        .1;
-    // n·x = n·p in the world; with x = R·x_o + t: (Rᵀn)·x_o = n·p − n·t.
-    let object_from_world = world_from_object.inverse();
-    let normal = object_from_world.transform_vector3(nearest.normal);
-    let offset = nearest.normal.dot(nearest.point)
-        - nearest.normal.dot(world_from_object.translation.into());
-    Some(SupportPlane { normal, offset })
+    tacmesh_physics::support_under(supports, &object.world_mesh().vertices)
+        .map(|s| s.in_frame(world_from_object))
+}
+
+/// The convex parts and mass properties of a published Body.
+fn published_parts(body: &Body) -> (Vec<TriMesh>, MassProperties, ProxyKind) {
+    let kind = match body.proxy {
+        BodyProxy::Shape => ProxyKind::Surface,
+        BodyProxy::ShadowVolume => ProxyKind::ShadowVolume,
+        BodyProxy::Extrusion => ProxyKind::Extrusion,
+    };
+    let mass = MassProperties {
+        volume_m3: body.volume_m3,
+        centre_of_mass: body.centre_of_mass,
+        inertia: body.inertia,
+    };
+    (body.hulls.iter().map(Hull::mesh).collect(), mass, kind)
 }
 
 /// The convex parts and mass properties of one object: its closed shape's, or its open shell's

@@ -214,7 +214,9 @@ fn check_solid(mesh: &TriMesh) -> Result<(Hull, MassProperties), PhysicsError> {
 
 // ---- V-HACD ---------------------------------------------------------------------------------
 
-fn vhacd_hulls(mesh: &TriMesh, config: &ConvexConfig) -> Vec<Hull> {
+/// The points of each part parry3d's V-HACD finds (each part's exact convex hull of the mesh
+/// inside it). Can panic inside parry on degenerate geometry: see [`convex_parts_with`].
+pub fn vhacd_part_points(mesh: &TriMesh, config: &ConvexConfig) -> Vec<Vec<Vec3>> {
     let params = VHACDParameters {
         resolution: config.resolution.max(8),
         concavity: config.concavity,
@@ -225,7 +227,7 @@ fn vhacd_hulls(mesh: &TriMesh, config: &ConvexConfig) -> Vec<Hull> {
     decomposition
         .compute_exact_convex_hulls(&mesh.vertices, &mesh.triangles)
         .into_iter()
-        .filter_map(|(points, _)| Hull::of(&points))
+        .map(|(points, _)| points)
         .collect()
 }
 
@@ -367,12 +369,32 @@ fn reduce_hull(hull: Hull, max_vertices: usize) -> (Hull, f32) {
 /// [`PhysicsError::FlatMesh`] when fewer than four vertices span a volume or the mesh is
 /// thinner than 1/1000 of its extent.
 pub fn convex_parts(mesh: &TriMesh, config: &ConvexConfig) -> Result<ConvexParts, PhysicsError> {
+    convex_parts_with(mesh, config, |mesh, config| {
+        Ok(vhacd_part_points(mesh, config))
+    })
+}
+
+/// [`convex_parts`] with the V-HACD step done by `decompose`, which returns the points of each
+/// part (the daemon runs it in a child process: parry's V-HACD can panic on degenerate
+/// geometry, and a panic aborts the daemon). When `decompose` fails, the mesh's convex hull
+/// stands in ([`Decomposition::SingleHullFallback`]): conservative, one hull.
+pub fn convex_parts_with(
+    mesh: &TriMesh,
+    config: &ConvexConfig,
+    decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
+) -> Result<ConvexParts, PhysicsError> {
     let (whole_hull, mesh_mass) = check_solid(mesh)?;
     let fill = f64::from(mesh_mass.volume_m3) / whole_hull.volume_m3;
     let (hulls, decomposition) = if fill >= f64::from(config.min_fill_for_one_hull) {
         (vec![whole_hull], Decomposition::SingleHull)
     } else {
-        let found = vhacd_hulls(mesh, config);
+        let found: Vec<Hull> = match decompose(mesh, config) {
+            Ok(parts) => parts.iter().filter_map(|points| Hull::of(points)).collect(),
+            Err(why) => {
+                tracing::warn!("convex decomposition failed ({why}); using the convex hull");
+                Vec::new()
+            }
+        };
         if found.is_empty() {
             (vec![whole_hull], Decomposition::SingleHullFallback)
         } else {

@@ -10,8 +10,11 @@ pub mod mjcf;
 pub mod orientation;
 pub mod proxy;
 pub mod stl;
+pub mod support;
 
-pub use convex::{convex_parts, ConvexConfig, ConvexParts, Decomposition};
+pub use convex::{
+    convex_parts, convex_parts_with, vhacd_part_points, ConvexConfig, ConvexParts, Decomposition,
+};
 pub use error::PhysicsError;
 pub use mass::MassProperties;
 pub use mjcf::{
@@ -19,4 +22,5 @@ pub use mjcf::{
     WorldFromBody, WrittenScene,
 };
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
+pub use support::{support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;

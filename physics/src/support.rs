@@ -1,0 +1,128 @@
+//! The support planes of a scene (tables, floors, published as fans of triangles in the world)
+//! and which one an object stands on, in the object's frame: what [`collision_proxy`]
+//! (crate::collision_proxy) closes a one-view shell towards.
+
+use glam::{Affine3A, Vec3};
+use tacmesh_source::TriMesh;
+
+use crate::proxy::SupportPlane;
+
+/// A support plane in the world: a point on it, its unit normal (towards the side its fan
+/// faces, where objects stand), its area and how far its fan reaches from that point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorldSupport {
+    pub object_id: u64,
+    pub point: Vec3,
+    pub normal: Vec3,
+    pub area_m2: f32,
+    pub half_size_m: f32,
+}
+
+impl WorldSupport {
+    /// The plane of a support's fan, in the world (area-weighted normal and centroid); `None`
+    /// for a fan with no area.
+    pub fn of_fan(object_id: u64, fan_in_world: &TriMesh) -> Option<WorldSupport> {
+        let mut area_normal = Vec3::ZERO;
+        let mut centre = Vec3::ZERO;
+        let mut area = 0.0;
+        for t in &fan_in_world.triangles {
+            let [a, b, c] = t.map(|i| fan_in_world.vertices[i as usize]);
+            let n = (b - a).cross(c - a);
+            area_normal += n;
+            area += 0.5 * n.length();
+            centre += 0.5 * n.length() * (a + b + c) / 3.0;
+        }
+        let normal = area_normal.try_normalize()?;
+        let point = centre / area;
+        let half_size_m = fan_in_world
+            .vertices
+            .iter()
+            .map(|v| v.distance(point))
+            .fold(0.0f32, f32::max);
+        Some(WorldSupport {
+            object_id,
+            point,
+            normal,
+            area_m2: area,
+            half_size_m,
+        })
+    }
+
+    /// This plane in an object's frame, given `world_from_object`.
+    pub fn in_frame(&self, world_from_object: Affine3A) -> SupportPlane {
+        // n·x = n·p in the world; with x = R·x_o + t: (Rᵀn)·x_o = n·p − n·t.
+        let normal = world_from_object
+            .inverse()
+            .transform_vector3(self.normal)
+            .normalize_or_zero();
+        let offset = self.normal.dot(self.point)
+            - self.normal.dot(Vec3::from(world_from_object.translation));
+        SupportPlane { normal, offset }
+    }
+}
+
+/// The support an object (its vertices in the world) stands on: of those it is above, up to a
+/// few centimetres under (noise, and the segmentation's margin), the nearest by its lowest
+/// vertex along each support's normal.
+pub fn support_under<'a>(
+    supports: &'a [WorldSupport],
+    object_in_world: &[Vec3],
+) -> Option<&'a WorldSupport> {
+    supports
+        .iter()
+        .filter_map(|s| {
+            let lowest = object_in_world
+                .iter()
+                .map(|v| s.normal.dot(*v - s.point))
+                .fold(f32::INFINITY, f32::min);
+            (lowest > -0.05).then_some((lowest, s))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, s)| s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(height: f32) -> TriMesh {
+        TriMesh::new(
+            vec![
+                Vec3::new(-1.0, -1.0, height),
+                Vec3::new(1.0, -1.0, height),
+                Vec3::new(1.0, 1.0, height),
+                Vec3::new(-1.0, 1.0, height),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn an_object_stands_on_the_nearest_support_below_it_in_its_own_frame() {
+        let floor = WorldSupport::of_fan(1, &table(0.0)).expect("a fan with area");
+        let desk = WorldSupport::of_fan(2, &table(0.7)).expect("a fan with area");
+        assert_eq!(desk.normal, Vec3::Z);
+        assert!((desk.area_m2 - 4.0).abs() < 1e-5);
+        let supports = [floor, desk];
+        let on_desk = [Vec3::new(0.0, 0.0, 0.71), Vec3::new(0.1, 0.0, 0.9)];
+        assert_eq!(
+            support_under(&supports, &on_desk).map(|s| s.object_id),
+            Some(2)
+        );
+        let on_floor = [Vec3::new(0.0, 0.0, 0.01)];
+        assert_eq!(
+            support_under(&supports, &on_floor).map(|s| s.object_id),
+            Some(1)
+        );
+        // In a frame turned upside down and moved: the plane keeps its place.
+        let world_from_object = Affine3A::from_rotation_translation(
+            glam::Quat::from_rotation_x(std::f32::consts::PI),
+            Vec3::new(0.0, 0.0, 1.0),
+        );
+        let plane = desk.in_frame(world_from_object);
+        let p_world = Vec3::new(0.3, -0.2, 0.7);
+        let p_object = world_from_object.inverse().transform_point3(p_world);
+        assert!(plane.height(p_object).abs() < 1e-5);
+        assert!(plane.normal.distance(-Vec3::Z) < 1e-5);
+    }
+}
