@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use tacmesh::glam::Vec3;
 use tacmesh::physics::orientation::signed_volume_m3;
 use tacmesh::physics::proxy::{collision_proxy, ProxyConfig, SupportPlane};
-use tacmesh::protocol::{Message, Scene, SceneChange, Shape};
+use tacmesh::protocol::{Body, BodyProxy, Message, Scene, SceneChange, Shape};
 use tacmesh::sim::{
     contact_fidelity, point_to_mesh_distances, sample_cloud, ContactConfig, SampleConfig,
     SceneFile, SceneObject,
@@ -153,6 +153,37 @@ impl Received {
                 _ => {}
             }
         }
+    }
+
+    /// The latest collision body of an object, placed in the world by its current pose: the
+    /// proxy (the shape itself for a closed shape) and the convex hulls together.
+    fn world_body(&self, object_id: u64) -> Option<(Body, TriMesh, TriMesh)> {
+        let object = self.scene.get(object_id)?;
+        let body = object.body.clone()?;
+        let pose = object.pose.world_from_object();
+        let place = |mesh: &TriMesh| {
+            TriMesh::new(
+                mesh.vertices
+                    .iter()
+                    .map(|&v| pose.transform_point3(v))
+                    .collect(),
+                mesh.triangles.clone(),
+            )
+        };
+        let proxy = match body.proxy {
+            BodyProxy::Shape => object.world_mesh(),
+            _ => place(&body.mesh),
+        };
+        let mut hulls = TriMesh::default();
+        for hull in &body.hulls {
+            let offset = hulls.vertices.len() as u32;
+            let placed = place(&hull.mesh());
+            hulls.vertices.extend(placed.vertices);
+            hulls
+                .triangles
+                .extend(placed.triangles.iter().map(|t| t.map(|i| i + offset)));
+        }
+        Some((body, proxy, hulls))
     }
 
     /// The latest state of every object still there.
@@ -374,9 +405,10 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         assert!(faces <= 300, "object {}: {faces} faces", object.id);
 
         // Contact (issue 13) against the true object at its true pose, with 10 mm probes: the
-        // published shell from the camera's side; its proxy closed along the camera's rays
-        // (what the daemon knows) and closed straight down (what `subscribe --mjcf` builds)
-        // from every side, where a conservative proxy lets no probe through.
+        // published shell from the camera's side; the published body's proxy (closed along the
+        // camera's rays by the daemon) and its convex hulls, and the proxy a subscriber can
+        // build itself (closed straight down), from every side, where a conservative proxy
+        // lets no probe through.
         let probes = |viewpoint_m| ContactConfig {
             probe_radii_m: vec![0.01],
             probe_lines: 2_000,
@@ -386,38 +418,94 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         let seen = contact_fidelity(&true_mesh, &upsert.world_mesh(), &probes(Some(eye)))
             .expect("contact with the shell")
             .overall;
-        let margin = ProxyConfig {
-            margin_m: upsert.report.max_residual_m,
-            ..ProxyConfig::default()
+        let (body, published_proxy, hulls) = got
+            .world_body(upsert.object_id())
+            .unwrap_or_else(|| panic!("object {}: no collision body", object.id));
+        assert_eq!(
+            body.shape_version,
+            upsert.version(),
+            "the body of the latest shape"
+        );
+        assert_eq!(
+            body.proxy,
+            BodyProxy::ShadowVolume,
+            "a one-view shell's body"
+        );
+        assert!(
+            (1..=8).contains(&body.hulls.len()),
+            "{} hulls",
+            body.hulls.len()
+        );
+        // What the body costs on the wire, beside its shape (full / compact encoding).
+        let bytes = |message: Message| {
+            let mut frame = Vec::new();
+            tacmesh::protocol::encode(&message, &mut frame).expect("a published message encodes");
+            frame.len()
         };
-        for (how, viewpoint) in [("along the rays", Some(eye)), ("straight down", None)] {
-            let proxy = collision_proxy(&upsert.world_mesh(), viewpoint, Some(TABLE), &margin);
-            let all_round = contact_fidelity(&true_mesh, &proxy.mesh, &probes(None))
+        let compact = tacmesh::protocol::Encoding::Compact;
+        eprintln!(
+            "object {}: shape {} / {} bytes, body {} / {} bytes ({} proxy faces, {} hulls of {} \
+             vertices)",
+            upsert.object_id(),
+            bytes(Message::Shape(upsert.clone())),
+            bytes(Message::Shape(Shape {
+                encoding: compact,
+                ..upsert.clone()
+            })),
+            bytes(Message::Body(body.clone())),
+            bytes(Message::Body(Body {
+                encoding: compact,
+                ..body.clone()
+            })),
+            body.mesh.triangles.len(),
+            body.hulls.len(),
+            body.hulls.iter().map(|h| h.vertices.len()).sum::<usize>()
+        );
+        let proxy_volume = signed_volume_m3(&published_proxy);
+        assert!(
+            (f64::from(body.volume_m3) - proxy_volume).abs() < 1e-3 * proxy_volume,
+            "the body's volume {} is its proxy's, {proxy_volume}",
+            body.volume_m3
+        );
+        let straight_down = collision_proxy(
+            &upsert.world_mesh(),
+            None,
+            Some(TABLE),
+            &ProxyConfig {
+                margin_m: upsert.report.max_residual_m,
+                ..ProxyConfig::default()
+            },
+        );
+        for (how, candidate, closed) in [
+            ("the published proxy", &published_proxy, true),
+            ("the published hulls", &hulls, true),
+            (
+                "the proxy closed straight down",
+                &straight_down.mesh,
+                straight_down.closed,
+            ),
+        ] {
+            let all_round = contact_fidelity(&true_mesh, candidate, &probes(None))
                 .expect("contact with the proxy")
                 .overall;
             let through = all_round.missed_by_candidate as f64 / all_round.probes as f64;
             eprintln!(
                 "object {}: shell from the camera: first contact {:.1} mm, normal p95 {:.0}°; \
-                 proxy closed {how} ({}): {:.2}× the true volume, {:.1} % of probes through, \
+                 {how}: {:.2}× the true volume, {:.1} % of probes through, \
                  {:.1} % stopped where nothing is",
                 upsert.object_id(),
                 seen.first_contact_m.mean * 1e3,
                 seen.normal_deg.p95,
-                if proxy.closed { "closed" } else { "OPEN" },
-                proxy.volume_m3 / signed_volume_m3(&true_mesh),
+                signed_volume_m3(candidate) / signed_volume_m3(&true_mesh),
                 through * 100.0,
                 all_round.extra_in_candidate as f64 / all_round.probes as f64 * 100.0
             );
-            assert!(
-                proxy.closed,
-                "object {}: proxy closed {how} is open",
-                object.id
-            );
+            assert!(closed, "object {}: {how} is open", object.id);
             // Straight down is a subscriber's guess (it does not know the camera): a rounded
-            // object's far side bulges past it. Along the camera's rays is the guarantee.
+            // object's far side bulges past it. The daemon's body is the guarantee.
             assert!(
-                viewpoint.is_none() || through < 0.03,
-                "object {}: {:.1} % of the probes pass through its proxy closed {how}",
+                how.contains("straight down") || through < 0.03,
+                "object {}: {:.1} % of the probes pass through {how}",
                 object.id,
                 through * 100.0
             );

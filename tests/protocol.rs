@@ -11,8 +11,8 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use tacmesh::glam::Vec3;
 use tacmesh::protocol::{
-    encode, Encoding, FrameDecoder, Kinds, Message, Scene, Sender, Shape, Stats, Subscribe,
-    FIRST_SUPPORT_ID,
+    encode, BodyProxy, Encoding, FrameDecoder, Kinds, Message, Scene, Sender, Shape, Stats,
+    Subscribe, FIRST_SUPPORT_ID, PROTOCOL_VERSION,
 };
 use tacmesh::source::monotonic_now;
 use tacmesh::subscriber::Subscription;
@@ -102,7 +102,7 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
         .map(|s| std::thread::spawn(move || read_for(s, RUN)))
         .collect();
 
-    // A version-1 client: it can read the Hello (its layout is frozen) and sees version 2;
+    // A version-1 client: it can read the Hello (its layout is frozen) and sees version 3;
     // the one that sends its empty Subscribe anyway is told why in a Goodbye.
     std::thread::sleep(Duration::from_secs(3));
     let mut old = UnixStream::connect(daemon.socket()).expect("connects");
@@ -120,12 +120,15 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
     match old_read.first() {
         Some(Message::Hello {
             protocol_version, ..
-        }) => assert_eq!(*protocol_version, 2),
+        }) => assert_eq!(*protocol_version, PROTOCOL_VERSION),
         other => panic!("a version-1 client's first message: {other:?}"),
     }
     match old_read.last() {
         Some(Message::Goodbye { reason }) => {
-            assert!(reason.contains("protocol version 2"), "{reason}")
+            assert!(
+                reason.contains(&format!("protocol version {PROTOCOL_VERSION}")),
+                "{reason}"
+            )
         }
         other => panic!("a version-1 client's last message: {other:?}"),
     }
@@ -148,6 +151,7 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
     check_stats(&full_read);
     check_compact_against_full(&compact_read, &full_read, moving);
     check_kind_filter(&supports_read);
+    check_bodies(&full_read, &compact_read, &supports_read);
     check_extrapolation(&extrapolating_read, &full_read, moving);
 }
 
@@ -254,7 +258,9 @@ fn check_conversation_and_times(read: &Read1) {
         .position(|&k| k == "SnapshotDone")
         .expect("a SnapshotDone");
     assert!(
-        kinds[1..done].iter().all(|&k| k == "Shape" || k == "Pose"),
+        kinds[1..done]
+            .iter()
+            .all(|&k| k == "Shape" || k == "Body" || k == "Pose"),
         "{kinds:?}"
     );
 
@@ -309,6 +315,104 @@ fn check_conversation_and_times(read: &Read1) {
         );
     }
     assert!(updates > 50, "only {updates} updates in {RUN:?}");
+}
+
+/// Every object gets collision bodies (docs/protocol.md, "Body"): each follows a Shape of its
+/// object, names a version it has published and not one from before a `new_frame` Shape; its
+/// proxy is closed with the body's volume, or the shape itself when that is closed; at most 8
+/// hulls. A compact subscriber gets compact bodies; one that asked for supports only, none.
+fn check_bodies(full: &Read1, compact: &Read1, supports_only: &Read1) {
+    use tacmesh::physics::orientation::signed_volume_m3;
+    let mut scene = Scene::new();
+    let mut bodies: HashMap<u64, usize> = HashMap::new();
+    let mut sizes = (0usize, 0usize);
+    for (_, size, message) in &full.messages {
+        let held = match message {
+            Message::Body(body) => scene.get(body.object_id).cloned(),
+            _ => None,
+        };
+        scene.apply(message);
+        let Message::Body(body) = message else {
+            continue;
+        };
+        let id = body.object_id;
+        assert!(id < FIRST_SUPPORT_ID, "a support plane got a body");
+        let held = held.unwrap_or_else(|| panic!("object {id}: a Body before its Shape"));
+        assert!(
+            body.shape_version <= held.shape.version()
+                && body.shape_version >= held.frame_since_version,
+            "object {id}: a body of shape {} with shape {} held (frame since {})",
+            body.shape_version,
+            held.shape.version(),
+            held.frame_since_version
+        );
+        assert!(
+            (1..=8).contains(&body.hulls.len()),
+            "{} hulls",
+            body.hulls.len()
+        );
+        let volume = match body.proxy {
+            BodyProxy::Shape => {
+                assert!(
+                    held.shape.is_closed(),
+                    "object {id}: an open shape as its own proxy"
+                );
+                signed_volume_m3(&held.shape.mesh)
+            }
+            _ => {
+                // Closed and consistently wound; where a proxy pinches, an edge may be shared by
+                // four faces (docs/protocol.md, Body).
+                assert!(
+                    tacmesh::physics::orientation::orientation(&body.mesh).is_closed(),
+                    "object {id}: an open proxy"
+                );
+                signed_volume_m3(&body.mesh)
+            }
+        };
+        // The shape itself may be a newer version than the body's (same frame): its volume
+        // is then not the body's, so only a proxy mesh is compared.
+        if body.proxy != BodyProxy::Shape || body.shape_version == held.shape.version() {
+            assert!(
+                (f64::from(body.volume_m3) - volume).abs() <= 1e-3 * volume.abs(),
+                "object {id}: body volume {} against its proxy's {volume}",
+                body.volume_m3
+            );
+        }
+        *bodies.entry(id).or_default() += 1;
+        sizes.0 += size;
+        sizes.1 += 1;
+    }
+    let objects = scene
+        .objects()
+        .filter(|o| o.object_id() < FIRST_SUPPORT_ID)
+        .count();
+    let with_body = scene
+        .objects()
+        .filter(|o| o.object_id() < FIRST_SUPPORT_ID && o.body.is_some())
+        .count();
+    eprintln!(
+        "bodies: {} of {objects} objects hold one at the end; {} bodies read, {:.0} bytes each \
+         on average (full encoding)",
+        with_body,
+        sizes.1,
+        sizes.0 as f64 / sizes.1.max(1) as f64
+    );
+    assert!(
+        with_body + 1 >= objects && with_body >= 3,
+        "{with_body} of {objects} objects have a body: {bodies:?}"
+    );
+    let second = answering_session(compact);
+    assert!(compact.messages[second..]
+        .iter()
+        .any(|(_, _, m)| matches!(m, Message::Body(b) if b.encoding == Encoding::Compact)));
+    assert!(
+        !supports_only
+            .messages
+            .iter()
+            .skip(answering_session(supports_only) + 1)
+            .any(|(_, _, m)| matches!(m, Message::Body(_))),
+        "a subscriber to supports only got a body"
+    );
 }
 
 /// The sliding cone's moves come as Poses of 97 bytes with the velocity it slides at (0.1 m/s

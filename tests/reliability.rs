@@ -427,7 +427,7 @@ fn sensor_faults_are_counted_survived_and_do_not_lose_published_meshes() {
     let mut snapshot = Vec::new();
     loop {
         match late_joiner.next_message().expect("the snapshot") {
-            Message::Session(_) | Message::Pose(_) => {}
+            Message::Session(_) | Message::Body(_) | Message::Pose(_) => {}
             Message::Shape(u) => snapshot.push(u.object_id()),
             Message::SnapshotDone => break,
             other => panic!("{} in the snapshot", other.name()),
@@ -591,7 +591,7 @@ fn a_hung_sensor_blocks_neither_subscribers_nor_shutdown() {
     let mut snapshot = Vec::new();
     loop {
         match late_joiner.next_message().expect("the snapshot") {
-            Message::Session(_) | Message::Pose(_) => {}
+            Message::Session(_) | Message::Body(_) | Message::Pose(_) => {}
             Message::Shape(u) => snapshot.push(u.object_id()),
             Message::SnapshotDone => break,
             other => panic!("{} in the snapshot", other.name()),
@@ -682,7 +682,7 @@ fn sigkill_then_restart_on_the_same_socket_gives_reconnecting_clients_a_full_sna
     let mut snapshot = Vec::new();
     loop {
         match again.next_message().expect("the snapshot") {
-            Message::Session(_) | Message::Pose(_) => {}
+            Message::Session(_) | Message::Body(_) | Message::Pose(_) => {}
             Message::Shape(u) => {
                 assert!(!u.mesh.triangles.is_empty(), "object {}", u.object_id());
                 snapshot.push(u.object_id());

@@ -237,6 +237,11 @@ impl Kinds {
         self.0 & other.0 == other.0
     }
 
+    /// These kinds and `other`'s.
+    pub fn with(self, other: Kinds) -> Kinds {
+        Kinds(self.0 | other.0)
+    }
+
     /// These kinds without `other`'s bits, or `None` when no object kind would be left.
     pub fn without(self, other: Kinds) -> Option<Kinds> {
         Kinds::from_bits(self.0 & !other.0)

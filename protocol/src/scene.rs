@@ -20,6 +20,9 @@ pub struct SceneObject {
     /// The newest Body (by `shape_version`), in the same frame as `shape` (a Shape with the
     /// `new_frame` flag drops an older one), placed by `pose` too; `None` until one comes.
     pub body: Option<Body>,
+    /// The version of the newest Shape held that said `new_frame` (0 if none has): a Body made
+    /// from an older shape is in a frame before the current one and does not fit.
+    pub frame_since_version: u64,
 }
 
 impl SceneObject {
@@ -61,8 +64,8 @@ pub enum SceneChange {
     /// SnapshotDone: the scene is the server's whole view as of the last Session.
     SnapshotDone,
     /// A Shape older than the held one, a Pose of another shape version than the held one or
-    /// older than the held pose, a Body older than the held one, or a Pose or Body of an
-    /// object not held: ignored (see "Only the latest").
+    /// older than the held pose, a Body older than the held one or than the object's frame,
+    /// or a Pose or Body of an object not held: ignored (see "Only the latest").
     Stale(u64),
     /// Nothing changed: a message that carries no scene (Hello, Stats, Goodbye, the client
     /// kinds), or a Remove of an object the scene does not hold.
@@ -125,6 +128,11 @@ impl Scene {
                     shape: shape.clone(),
                     pose: shape.pose,
                     body: None,
+                    frame_since_version: if shape.is_new_frame() {
+                        shape.version()
+                    } else {
+                        0
+                    },
                 },
             );
             return SceneChange::Added(id);
@@ -137,11 +145,13 @@ impl Scene {
         held.shape = shape.clone();
         held.pose = shape.pose;
         if shape.is_new_frame() {
-            held.body = held
-                .body
-                .take()
-                .filter(|body| body.shape_version >= shape.version());
+            held.frame_since_version = held.frame_since_version.max(shape.version());
         }
+        let frame_since = held.frame_since_version;
+        held.body = held
+            .body
+            .take()
+            .filter(|body| body.shape_version >= frame_since);
         SceneChange::Reshaped(id)
     }
 
@@ -149,10 +159,11 @@ impl Scene {
         let id = body.object_id;
         match self.objects.get_mut(&id) {
             Some(held)
-                if held
-                    .body
-                    .as_ref()
-                    .is_none_or(|b| body.shape_version >= b.shape_version) =>
+                if body.shape_version >= held.frame_since_version
+                    && held
+                        .body
+                        .as_ref()
+                        .is_none_or(|b| body.shape_version >= b.shape_version) =>
             {
                 held.body = Some(body.clone());
                 SceneChange::Bodied(id)

@@ -33,6 +33,8 @@ const SNAPSHOT_DONE: [u8; 5] = [1, 0, 0, 0, 4];
 /// An object's shape, encoded both ways (a subscriber asks for one), and its version.
 pub struct EncodedShape {
     pub version: u64,
+    /// The shape's `new_frame` flag: a body made from an earlier shape no longer fits.
+    pub new_frame: bool,
     /// The pose inside it.
     pub pose: Pose,
     /// The Shape frame in [`Encoding::Full`](tacmesh_protocol::Encoding::Full).
@@ -57,16 +59,54 @@ pub struct EncodedPose {
     pub bytes: Vec<u8>,
 }
 
-/// What is current of one object: its shape, and a pose newer than the one inside the shape.
+/// An object's collision body, encoded both ways (its proxy mesh in a subscriber's encoding),
+/// and the shape version it was made from.
+pub struct EncodedBody {
+    pub shape_version: u64,
+    /// The Body frame with its proxy in [`Encoding::Full`](tacmesh_protocol::Encoding::Full).
+    pub full: Vec<u8>,
+    /// The Body frame with its proxy in
+    /// [`Encoding::Compact`](tacmesh_protocol::Encoding::Compact).
+    pub compact: Vec<u8>,
+}
+
+impl EncodedBody {
+    /// The frame in `encoding`.
+    pub fn bytes(&self, encoding: tacmesh_protocol::Encoding) -> &[u8] {
+        match encoding {
+            tacmesh_protocol::Encoding::Full => &self.full,
+            tacmesh_protocol::Encoding::Compact => &self.compact,
+        }
+    }
+}
+
+/// What is current of one object: its shape, its collision body, and a pose newer than the one
+/// inside the shape.
 #[derive(Clone, Default)]
 pub(crate) struct ObjectFrames {
     pub(crate) shape: Option<Arc<EncodedShape>>,
+    pub(crate) body: Option<Arc<EncodedBody>>,
     pub(crate) pose: Option<Arc<EncodedPose>>,
+    /// The first shape version in the object's current frame (the last shape with the
+    /// `new_frame` flag, or 0): a body made from an earlier one does not fit. Kept by the
+    /// publisher's current state only.
+    pub(crate) frame_since_version: u64,
 }
 
 impl ObjectFrames {
     fn is_empty(&self) -> bool {
-        self.shape.is_none() && self.pose.is_none()
+        self.shape.is_none() && self.body.is_none() && self.pose.is_none()
+    }
+
+    /// These frames as `options` let them through: without the body unless bodies are asked for.
+    fn for_options(&self, options: &Subscribe) -> ObjectFrames {
+        ObjectFrames {
+            body: self
+                .body
+                .clone()
+                .filter(|_| options.kinds.contains(Kinds::BODIES)),
+            ..self.clone()
+        }
     }
 }
 
@@ -85,7 +125,7 @@ pub(crate) enum Retire {
 struct Updates {
     /// A snapshot is to be written first: Session, `objects`, SnapshotDone.
     snapshot: bool,
-    /// The latest unsent shape and pose of each object.
+    /// The latest unsent shape, body and pose of each object.
     objects: BTreeMap<u64, ObjectFrames>,
     /// Unsent removes; an id is never in both.
     removes: BTreeSet<u64>,
@@ -125,7 +165,8 @@ fn filtered(
     current
         .iter()
         .filter(|(&id, _)| passes(options, id))
-        .map(|(&id, frames)| (id, frames.clone()))
+        .map(|(&id, frames)| (id, frames.for_options(options)))
+        .filter(|(_, frames)| !frames.is_empty())
         .collect()
 }
 
@@ -161,20 +202,32 @@ impl Client {
         }
     }
 
-    /// A new shape of an object (it replaces an unsent shape and pose of it).
+    /// A new shape of an object (it replaces an unsent shape and pose of it, and an unsent
+    /// body when the shape is in a new frame).
     pub(crate) fn queue_shape(&self, object_id: u64, frames: &Arc<EncodedShape>) {
         let mut pending = lock(&self.pending);
         if !passes(&pending.options, object_id) {
             return;
         }
         pending.updates.removes.remove(&object_id);
-        pending.updates.objects.insert(
-            object_id,
-            ObjectFrames {
-                shape: Some(Arc::clone(frames)),
-                pose: None,
-            },
-        );
+        let queued = pending.updates.objects.entry(object_id).or_default();
+        queued.shape = Some(Arc::clone(frames));
+        queued.pose = None;
+        if frames.new_frame {
+            queued.body = None;
+        }
+        drop(pending);
+        self.wake.notify_one();
+    }
+
+    /// A new collision body of an object (it replaces an unsent body, and goes after an
+    /// unsent shape), if the subscriber asked for bodies.
+    pub(crate) fn queue_body(&self, object_id: u64, frames: &Arc<EncodedBody>) {
+        let mut pending = lock(&self.pending);
+        if !passes(&pending.options, object_id) || !pending.options.kinds.contains(Kinds::BODIES) {
+            return;
+        }
+        pending.updates.objects.entry(object_id).or_default().body = Some(Arc::clone(frames));
         drop(pending);
         self.wake.notify_one();
     }
@@ -223,7 +276,10 @@ impl Client {
             let Updates {
                 objects, removes, ..
             } = &mut pending.updates;
-            objects.retain(|&id, _| passes(&options, id));
+            objects.retain(|&id, frames| {
+                *frames = frames.for_options(&options);
+                passes(&options, id) && !frames.is_empty()
+            });
             removes.retain(|&id| passes(&options, id));
         }
         pending.options = options;
@@ -316,7 +372,7 @@ struct Written {
     pose: std::collections::HashMap<u64, Pose>,
 }
 
-/// Takes what may be written now: everything, except the shapes and poses of objects written
+/// Takes what may be written now: everything, except the updates of objects written
 /// less than 1/`max_rate_hz` ago (a snapshot takes everything). For a client that
 /// extrapolates poses, a Pose its extrapolation already matches is dropped, not sent. Returns
 /// the batch and when the earliest held-back object may go.
@@ -523,8 +579,8 @@ fn write_all_frames(shared: &Shared, client: &Client) -> Result<(), WriteFailure
     }
 }
 
-/// Writes one batch: a Session first if it is a snapshot, the shapes and poses (then
-/// SnapshotDone for a snapshot), the removes and the stats.
+/// Writes one batch: a Session first if it is a snapshot, each object's shape, body and pose
+/// (then SnapshotDone for a snapshot), the removes and the stats.
 fn send_batch(
     send: &impl Fn(&[u8]) -> Result<(), WriteFailure>,
     shared: &Shared,
@@ -558,6 +614,10 @@ fn send_batch(
                 version = shape.version,
                 "sent shape"
             );
+        }
+        if let Some(body) = &frames.body {
+            send(body.bytes(options.encoding))?;
+            shared.bodies_published.fetch_add(1, Ordering::Relaxed);
         }
         if let Some(pose) = &frames.pose {
             send(&pose.bytes)?;

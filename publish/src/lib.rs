@@ -4,14 +4,14 @@
 //! Entry points:
 //! - [`Publisher::bind`]: claim the socket path (refusing a live daemon or a non-socket, removing
 //!   a stale socket), set its mode, and start accepting subscribers.
-//! - [`Publisher::shape`], [`Publisher::pose`], [`Publisher::remove`], [`Publisher::stats`]:
-//!   called by the pipeline; they never wait for a subscriber.
+//! - [`Publisher::shape`], [`Publisher::body`], [`Publisher::pose`], [`Publisher::remove`],
+//!   [`Publisher::stats`]: called by the pipeline; they never wait for a subscriber.
 //! - [`Publisher::counters`], [`Publisher::shutdown`].
 //!
 //! Every subscriber gets `Hello`, a snapshot (`Session`, a `Shape` of every current object,
 //! `SnapshotDone`), then live updates, and a new snapshot when its `Subscribe` asks for one.
 //! Each subscriber has its own writer thread and a pending state that holds at most the latest
-//! unsent shape and pose of each object, the unsent removes and the latest stats: a slow
+//! unsent shape, body and pose of each object, the unsent removes and the latest stats: a slow
 //! subscriber skips versions, and its memory stays bounded by the number of objects. Each
 //! subscriber's options (encoding, rate cap per object, which objects) are applied by its
 //! writer. Its socket's kernel buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can
@@ -37,11 +37,11 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{
-    encode, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
+    encode, Body, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
 };
 
 use crate::client::{Client, ObjectFrames, Retire};
-pub use crate::client::{EncodedPose, EncodedShape};
+pub use crate::client::{EncodedBody, EncodedPose, EncodedShape};
 
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
@@ -75,6 +75,8 @@ pub trait Mirror: Send + Sync {
     fn shape(&self, object_id: u64, shape: &Arc<EncodedShape>);
     /// A new pose of an object's published shape (a Pose frame).
     fn pose(&self, object_id: u64, pose: &Arc<EncodedPose>);
+    /// A new collision body of an object.
+    fn body(&self, object_id: u64, body: &Arc<EncodedBody>);
     /// The object is gone.
     fn remove(&self, object_id: u64);
     /// The latest Stats frame.
@@ -149,6 +151,8 @@ pub struct PublisherCounters {
     pub shapes_published: u64,
     /// Pose frames written to subscribers, summed over subscribers.
     pub poses_published: u64,
+    /// Body frames written to subscribers, summed over subscribers.
+    pub bodies_published: u64,
     /// Bytes written to all subscribers.
     pub bytes_sent: u64,
 }
@@ -262,6 +266,19 @@ pub enum PublishError {
 
     #[error("the stats cannot be published: {cause}")]
     EncodeStats { cause: WireError },
+
+    #[error("the body of object {object_id} cannot be published: {cause}")]
+    EncodeBody { object_id: u64, cause: WireError },
+
+    #[error(
+        "a body of object {object_id} was made from shape version {version}, which {why}; a \
+         body is published after its shape, in that shape's frame"
+    )]
+    BodyDoesNotFit {
+        object_id: u64,
+        version: u64,
+        why: String,
+    },
 }
 
 /// State shared by the publisher handle, the accept thread and every subscriber's threads.
@@ -276,6 +293,7 @@ pub(crate) struct Shared {
     clients_refused: AtomicU64,
     shapes_published: AtomicU64,
     poses_published: AtomicU64,
+    bodies_published: AtomicU64,
     bytes_sent: AtomicU64,
 }
 
@@ -351,6 +369,7 @@ impl Publisher {
             clients_refused: AtomicU64::new(0),
             shapes_published: AtomicU64::new(0),
             poses_published: AtomicU64::new(0),
+            bodies_published: AtomicU64::new(0),
             bytes_sent: AtomicU64::new(0),
         });
         let accept_shared = Arc::clone(&shared);
@@ -416,6 +435,7 @@ impl Publisher {
         };
         let frames = Arc::new(EncodedShape {
             version,
+            new_frame: shape.is_new_frame(),
             pose: shape.pose,
             full: encode_as(Encoding::Full)?,
             compact: encode_as(Encoding::Compact)?,
@@ -432,13 +452,14 @@ impl Publisher {
                 });
             }
         }
-        state.objects.insert(
-            object_id,
-            ObjectFrames {
-                shape: Some(Arc::clone(&frames)),
-                pose: None,
-            },
-        );
+        let object = state.objects.entry(object_id).or_default();
+        object.shape = Some(Arc::clone(&frames));
+        object.pose = None;
+        if frames.new_frame {
+            // Made in the frame before: it does not fit the new shape.
+            object.body = None;
+            object.frame_since_version = version;
+        }
         for client in state.clients.values() {
             client.queue_shape(object_id, &frames);
         }
@@ -485,6 +506,75 @@ impl Publisher {
         Ok(())
     }
 
+    /// Publishes an object's collision body, made from its shape of `body.shape_version`.
+    /// Returns at once; a newer body replaces an unsent one. It stays the object's body, with
+    /// its newer shapes too, until another body replaces it or a shape in a new frame comes.
+    ///
+    /// Errors: [`PublishError::BodyDoesNotFit`] when that shape was not published, or a shape
+    /// in a new frame (or a newer body) has been published since; [`PublishError::EncodeBody`]
+    /// for a body the wire format refuses.
+    pub fn body(&self, body: Body) -> Result<(), PublishError> {
+        let object_id = body.object_id;
+        let version = body.shape_version;
+        let encode_as = |encoding: Encoding| {
+            let mut bytes = Vec::new();
+            let body = Body {
+                encoding,
+                ..body.clone()
+            };
+            encode(&Message::Body(body), &mut bytes)
+                .map(|()| bytes)
+                .map_err(|cause| PublishError::EncodeBody { object_id, cause })
+        };
+        let frames = Arc::new(EncodedBody {
+            shape_version: version,
+            full: encode_as(Encoding::Full)?,
+            compact: encode_as(Encoding::Compact)?,
+        });
+        let mut state = lock(&self.shared.state);
+        let does_not_fit = |why: String| PublishError::BodyDoesNotFit {
+            object_id,
+            version,
+            why,
+        };
+        let object = state
+            .objects
+            .get_mut(&object_id)
+            .ok_or_else(|| does_not_fit("is not published (the object is unknown)".into()))?;
+        let shape = object
+            .shape
+            .as_ref()
+            .ok_or_else(|| does_not_fit("is not published".into()))?;
+        if version > shape.version {
+            return Err(does_not_fit(format!(
+                "is newer than the published shape, version {}",
+                shape.version
+            )));
+        }
+        if version < object.frame_since_version {
+            return Err(does_not_fit(format!(
+                "is in another frame than the published shapes since version {}",
+                object.frame_since_version
+            )));
+        }
+        if let Some(held) = &object.body {
+            if held.shape_version > version {
+                return Err(does_not_fit(format!(
+                    "is older than that of the published body, version {}",
+                    held.shape_version
+                )));
+            }
+        }
+        object.body = Some(Arc::clone(&frames));
+        for client in state.clients.values() {
+            client.queue_body(object_id, &frames);
+        }
+        for mirror in &state.mirrors {
+            mirror.body(object_id, &frames);
+        }
+        Ok(())
+    }
+
     /// Publishes that an object is gone. An unsent mesh of it is not sent. Unknown ids are
     /// ignored. Returns at once.
     pub fn remove(&self, object_id: u64) {
@@ -526,6 +616,9 @@ impl Publisher {
             if let Some(shape) = &frames.shape {
                 mirror.shape(object_id, shape);
             }
+            if let Some(body) = &frames.body {
+                mirror.body(object_id, body);
+            }
             if let Some(pose) = &frames.pose {
                 mirror.pose(object_id, pose);
             }
@@ -542,6 +635,7 @@ impl Publisher {
             clients_refused: self.shared.clients_refused.load(Ordering::Relaxed),
             shapes_published: self.shared.shapes_published.load(Ordering::Relaxed),
             poses_published: self.shared.poses_published.load(Ordering::Relaxed),
+            bodies_published: self.shared.bodies_published.load(Ordering::Relaxed),
             bytes_sent: self.shared.bytes_sent.load(Ordering::Relaxed),
         }
     }

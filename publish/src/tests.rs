@@ -868,7 +868,7 @@ fn a_rate_cap_sends_the_latest_update_once_per_interval() {
 /// A version-1 client that sends its empty Subscribe gets a Goodbye saying which version the
 /// server speaks, and is let go; others are served on.
 #[test]
-fn a_version_1_subscribe_gets_a_goodbye_naming_version_2() {
+fn a_version_1_subscribe_gets_a_goodbye_naming_the_version_spoken() {
     let dir = tempfile::tempdir().unwrap();
     let (path, publisher, mut other) = serving_one_client(&dir);
     let mut old = TestClient::connect(&path);
@@ -881,7 +881,10 @@ fn a_version_1_subscribe_gets_a_goodbye_naming_version_2() {
         }
     }
     let reason = reason.expect("a Goodbye before the end");
-    assert!(reason.contains("protocol version 2"), "{reason}");
+    assert!(
+        reason.contains(&format!("protocol version {PROTOCOL_VERSION}")),
+        "{reason}"
+    );
     assert!(reason.contains("version-1 Subscribe"), "{reason}");
     wait_until("the old client counted", || {
         publisher.counters().clients_dropped == 1
@@ -947,4 +950,153 @@ fn an_extrapolating_client_gets_only_the_poses_its_extrapolation_misses() {
         "on the extrapolated path: nothing until the last one sent is a second old"
     );
     assert_eq!(publisher.counters().poses_published, 2);
+}
+
+/// A unit cube's body for object `object_id`, made from its shape of `version`.
+fn body(object_id: u64, version: u64) -> tacmesh_protocol::Body {
+    let corners: Vec<Vec3> = (0..8)
+        .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+        .collect();
+    let faces: Vec<[u8; 3]> = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    tacmesh_protocol::Body {
+        object_id,
+        shape_version: version,
+        proxy: tacmesh_protocol::BodyProxy::ShadowVolume,
+        margin_m: 0.01,
+        volume_m3: 1.0,
+        centre_of_mass: Vec3::splat(0.5),
+        inertia: [
+            [1.0 / 6.0, 0.0, 0.0],
+            [0.0, 1.0 / 6.0, 0.0],
+            [0.0, 0.0, 1.0 / 6.0],
+        ],
+        mesh: TriMesh::new(
+            corners.clone(),
+            faces.iter().map(|f| f.map(u32::from)).collect(),
+        ),
+        encoding: Encoding::Full,
+        hulls: vec![tacmesh_protocol::Hull {
+            vertices: corners,
+            triangles: faces,
+        }],
+    }
+}
+
+fn received_body(client: &mut TestClient) -> tacmesh_protocol::Body {
+    match client.expect() {
+        Message::Body(body) => body,
+        other => panic!("expected Body, got {other:?}"),
+    }
+}
+
+/// A body goes out after its shape and before a newer pose, live and in a late joiner's
+/// snapshot, and stays with the object's newer shapes until a shape in a new frame.
+#[test]
+fn a_body_follows_its_shape_and_stays_until_the_frame_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, publisher, mut client) = serving_one_client(&dir);
+    publisher.shape(shape(1, 1, 10)).unwrap();
+    publisher.body(body(1, 1)).unwrap();
+    publisher.pose(pose(1, 1, 2000)).unwrap();
+    assert_eq!(client.shape().version(), 1);
+    assert_eq!(received_body(&mut client), body(1, 1));
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 2000)));
+    // A newer shape in the same frame keeps the body: a late joiner gets both.
+    publisher.shape(shape(1, 2, 10)).unwrap();
+    assert_eq!(client.shape().version(), 2);
+    let mut late = TestClient::connect(&path);
+    late.hello();
+    assert!(matches!(late.expect(), Message::Session(_)));
+    assert_eq!(late.shape().version(), 2);
+    assert_eq!(received_body(&mut late).shape_version, 1);
+    assert_eq!(late.expect(), Message::SnapshotDone);
+    // A shape in a new frame drops it, and a body made before it no longer fits.
+    let mut moved = shape(1, 3, 10);
+    moved.flags = tacmesh_protocol::SHAPE_NEW_FRAME;
+    publisher.shape(moved).unwrap();
+    let refused = publisher.body(body(1, 2)).unwrap_err();
+    assert!(
+        matches!(refused, PublishError::BodyDoesNotFit { version: 2, .. }),
+        "{refused}"
+    );
+    assert!(refused.to_string().contains("another frame"), "{refused}");
+    let mut later = TestClient::connect(&path);
+    later.hello();
+    assert_eq!(later.snapshot(), vec![(1, 3)], "no body in the snapshot");
+    wait_until("bodies counted", || {
+        publisher.counters().bodies_published == 2
+    });
+}
+
+#[test]
+fn a_body_for_a_shape_not_published_or_older_than_the_held_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let publisher = publisher(&socket_in(&dir));
+    assert!(matches!(
+        publisher.body(body(1, 1)),
+        Err(PublishError::BodyDoesNotFit { .. })
+    ));
+    publisher.shape(shape(1, 2, 3)).unwrap();
+    let newer = publisher.body(body(1, 3)).unwrap_err();
+    assert!(
+        newer.to_string().contains("newer than the published shape"),
+        "{newer}"
+    );
+    publisher.body(body(1, 2)).unwrap();
+    let older = publisher.body(body(1, 1)).unwrap_err();
+    assert!(
+        older.to_string().contains("published body, version 2"),
+        "{older}"
+    );
+    let mut bad = body(1, 2);
+    bad.volume_m3 = f32::NAN;
+    assert!(matches!(
+        publisher.body(bad),
+        Err(PublishError::EncodeBody { object_id: 1, .. })
+    ));
+}
+
+/// A client that does not ask for bodies gets none; asking for them with a resend brings them
+/// in its snapshot, in the encoding it asked for.
+#[test]
+fn bodies_reach_only_the_clients_that_ask_for_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, publisher, mut client) = serving_one_client(&dir);
+    client.send(Message::Subscribe(Subscribe {
+        kinds: Kinds::OBJECTS,
+        resend: true,
+        ..Subscribe::default()
+    }));
+    assert_eq!(client.snapshot(), vec![]);
+    publisher.shape(shape(1, 1, 10)).unwrap();
+    publisher.body(body(1, 1)).unwrap();
+    publisher.pose(pose(1, 1, 2000)).unwrap();
+    assert_eq!(client.shape().version(), 1);
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 2000)), "no body");
+    client.send(Message::Subscribe(Subscribe {
+        kinds: Kinds::ALL,
+        encoding: Encoding::Compact,
+        resend: true,
+        ..Subscribe::default()
+    }));
+    assert!(matches!(client.expect(), Message::Session(_)));
+    assert_eq!(client.shape().encoding, Encoding::Compact);
+    let compact = received_body(&mut client);
+    assert_eq!(compact.encoding, Encoding::Compact);
+    assert_eq!(compact.hulls, body(1, 1).hulls);
+    assert_eq!(client.expect(), Message::Pose(pose(1, 1, 2000)));
+    assert_eq!(client.expect(), Message::SnapshotDone);
 }

@@ -1,5 +1,5 @@
-"""A client for the tacmesh daemon (protocol version 2): typed messages with numpy arrays, the
-current scene, reconnection.
+"""A client for the tacmesh daemon (protocol version 3): typed messages with numpy arrays (the
+objects' shapes, poses and collision bodies), the current scene, reconnection.
 
 See README.md beside this package, and docs/protocol.md in the repository for the wire format.
 """
@@ -22,10 +22,13 @@ from .wire import (
     FIRST_SUPPORT_ID,
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
+    Body,
+    BodyProxy,
     Encoding,
     FrameDecoder,
     Goodbye,
     Hello,
+    Hull,
     Kinds,
     Message,
     Pose,
@@ -49,10 +52,13 @@ __all__ = [
     "FIRST_SUPPORT_ID",
     "PROTOCOL_VERSION",
     "SUPPORTED_VERSIONS",
+    "Body",
+    "BodyProxy",
     "Encoding",
     "FrameDecoder",
     "Goodbye",
     "Hello",
+    "Hull",
     "Kinds",
     "Mesh",
     "Message",

@@ -3,10 +3,11 @@ docs/operating.md, "Across the network"). Needs the ``eclipse-zenoh`` package
 (``pip install './python[zenoh]'``).
 
 Every sample carries one frame of docs/protocol.md; the keys are, under ``tacmesh/<robot>``:
-``objects/<id>/shape``, ``objects/<id>/pose``, ``objects/<id>/removed`` and ``stats``. A query
-on ``tacmesh/<robot>/objects/**`` answers with the current scene, which
-:class:`ZenohSubscriber` yields first (its Shapes, then the Poses newer than them, then
-``SnapshotDone``), then every sample as it comes, keeping :attr:`ZenohSubscriber.scene`.
+``objects/<id>/shape``, ``objects/<id>/body``, ``objects/<id>/pose``, ``objects/<id>/removed``
+and ``stats``. A query on ``tacmesh/<robot>/objects/**`` answers with the current scene, which
+:class:`ZenohSubscriber` yields first (its Shapes, then the Bodies and the Poses newer than
+them, then ``SnapshotDone``), then every sample as it comes, keeping
+:attr:`ZenohSubscriber.scene` (whose rules hold wherever Shapes and Bodies travel apart).
 """
 
 from __future__ import annotations

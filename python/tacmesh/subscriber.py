@@ -25,6 +25,8 @@ from .wire import (
     FIRST_SUPPORT_ID,
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
+    Body,
+    BodyProxy,
     Encoding,
     FrameDecoder,
     Goodbye,
@@ -55,6 +57,8 @@ class VersionMismatch(ConnectionError):
 
 
 class Mesh(NamedTuple):
+    """A triangle mesh: an object's shape, its body's proxy or one of its hulls."""
+
     #: ``float32 (V, 3)``, metres.
     vertices: npt.NDArray[np.float32]
     #: ``uint32 (T, 3)``.
@@ -63,11 +67,18 @@ class Mesh(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class SceneObject:
-    """One object (or support plane) as the scene holds it: its latest shape and the latest
-    pose for that shape."""
+    """One object (or support plane) as the scene holds it: its latest shape, the latest pose
+    for that shape, and its newest collision body if it has one that fits the shape's frame."""
 
     shape: Shape
     pose: Pose
+    #: The newest Body (by ``shape_version``) in the object's current frame; None before the
+    #: first, for a support plane, for an object with no volume, or when bodies are not asked
+    #: for. It may have been made from an older shape than ``shape`` (in the same frame).
+    body: Body | None = None
+    #: The version of the newest Shape held that said ``new_frame`` (0 if none has): a Body of
+    #: an older version is in a frame before the current one and does not fit.
+    frame_version: int = 0
 
     @property
     def object_id(self) -> int:
@@ -111,6 +122,36 @@ class SceneObject:
         """The object's mesh in the world frame."""
         return Mesh(self.world_vertices, self.shape.triangles)
 
+    @cached_property
+    def world_proxy(self) -> Mesh | None:
+        """The body's collision proxy in the world frame (mapped by the current pose), a closed
+        surface; None without a body. For a body whose proxy is its shape (``BodyProxy.SHAPE``)
+        it is the held shape's :attr:`mesh`."""
+        if self.body is None:
+            return None
+        if self.body.proxy is BodyProxy.SHAPE:
+            return self.mesh
+        return Mesh(self.pose.to_world(self.body.vertices), self.body.triangles)
+
+    @cached_property
+    def world_hulls(self) -> tuple[Mesh, ...]:
+        """The body's convex hulls in the world frame (mapped by the current pose), triangles
+        ``uint32``; none without a body."""
+        if self.body is None:
+            return ()
+        return tuple(
+            Mesh(self.pose.to_world(hull.vertices), hull.triangles.astype(np.uint32))
+            for hull in self.body.hulls
+        )
+
+    @property
+    def world_centre_of_mass(self) -> npt.NDArray[np.float32] | None:
+        """``float32 (3,)``: the body's centre of mass in the world frame; None without a body."""
+        if self.body is None:
+            return None
+        centre: npt.NDArray[np.float32] = self.pose.to_world(self.body.centre_of_mass)[0]
+        return centre
+
     @property
     def shape_time_ns(self) -> int:
         return self.shape.shape_time_ns
@@ -133,10 +174,15 @@ class Scene:
       ignored), with its own pose.
     - A Pose applies only to the shape version it names (another is stale and ignored), and
       never takes an object's pose time or last-seen time backwards.
-    - A Remove forgets the object.
+    - A Body is kept beside the shape, the newest by ``shape_version``, and placed by the same
+      pose. A Body of an object not held, older than the held one, or older than the newest
+      Shape held that said ``new_frame`` (made in the frame before) is stale and ignored; a
+      Shape with ``new_frame`` drops a held Body older than it.
+    - A Remove forgets the object (its body with it).
 
-    ``stale`` counts the Shapes and Poses ignored. ``session`` and ``stats`` are the latest of
-    each; :meth:`realtime_ns` maps a monotonic time of the stream onto the daemon's wall clock.
+    ``stale`` counts the Shapes, Bodies and Poses ignored. ``session`` and ``stats`` are the
+    latest of each; :meth:`realtime_ns` maps a monotonic time of the stream onto the daemon's
+    wall clock.
     """
 
     def __init__(self) -> None:
@@ -158,6 +204,8 @@ class Scene:
             self._shape(message)
         elif isinstance(message, Pose):
             self._pose(message)
+        elif isinstance(message, Body):
+            self._body(message)
         elif isinstance(message, Remove):
             self.objects.pop(message.object_id, None)
         elif isinstance(message, SnapshotDone):
@@ -171,10 +219,14 @@ class Scene:
         self.complete = False
 
     def keep_only(self, options: Subscribe) -> None:
-        """Forgets the objects outside the filter of ``options`` (its kinds and ids): what a
-        client does after a Subscribe without ``resend``."""
+        """Forgets the objects outside the filter of ``options`` (its kinds and ids), and the
+        bodies when it does not ask for them: what a client does after a Subscribe without
+        ``resend``."""
         for object_id in [i for i in self.objects if not options.admits(i)]:
             del self.objects[object_id]
+        if not options.bodies:
+            for object_id, held in list(self.objects.items()):
+                self.objects[object_id] = replace(held, body=None)
 
     def _shape(self, shape: Shape) -> None:
         held = self.objects.get(shape.object_id)
@@ -185,7 +237,13 @@ class Scene:
             # The same shape again: its pose is news only if it is newer.
             self._pose(shape.pose)
             return
-        self.objects[shape.object_id] = SceneObject(shape, shape.pose)
+        frame_version = held.frame_version if held is not None else 0
+        if shape.is_new_frame:
+            frame_version = shape.shape_version
+        body = held.body if held is not None else None
+        if body is not None and body.shape_version < frame_version:
+            body = None  # made in the frame before this shape's
+        self.objects[shape.object_id] = SceneObject(shape, shape.pose, body, frame_version)
 
     def _pose(self, pose: Pose) -> None:
         held = self.objects.get(pose.object_id)
@@ -197,7 +255,18 @@ class Scene:
         ):
             self.stale += 1
             return
-        self.objects[pose.object_id] = SceneObject(held.shape, pose)
+        self.objects[pose.object_id] = replace(held, pose=pose)
+
+    def _body(self, body: Body) -> None:
+        held = self.objects.get(body.object_id)
+        if (
+            held is None
+            or body.shape_version < held.frame_version
+            or (held.body is not None and body.shape_version < held.body.shape_version)
+        ):
+            self.stale += 1
+            return
+        self.objects[body.object_id] = replace(held, body=body)
 
     def realtime_ns(self, monotonic_ns: int) -> int | None:
         """A monotonic time of the stream on the daemon's wall clock (``CLOCK_REALTIME``), by
@@ -229,19 +298,22 @@ def remote_age_s(realtime_ns: int) -> float:
 
 EncodingName = Union[str, Encoding]
 KindName = Union[str, Kinds]
+#: What a client asks for by default: objects, support planes and the objects' bodies.
+ALL_KINDS: tuple[str, ...] = ("objects", "supports", "bodies")
 
 
 def options_of(
     *,
     encoding: EncodingName = "full",
     max_rate_hz: float = 0.0,
-    kinds: Iterable[KindName] | KindName = ("objects", "supports"),
+    kinds: Iterable[KindName] | KindName = ALL_KINDS,
     object_ids: Iterable[int] = (),
     resend: bool = False,
     extrapolate: bool = False,
 ) -> Subscribe:
     """A :class:`~tacmesh.wire.Subscribe` from friendly values: ``encoding`` ``"full"`` or
-    ``"compact"``, ``kinds`` any of ``"objects"``, ``"supports"``."""
+    ``"compact"``, ``kinds`` any of ``"objects"``, ``"supports"``, ``"bodies"`` (at least one
+    of the first two; all three by default)."""
     if isinstance(encoding, str):
         try:
             encoding = Encoding[encoding.upper()]
@@ -255,10 +327,14 @@ def options_of(
             try:
                 kind = Kinds[kind.upper()]
             except KeyError:
-                raise ValueError(f"kind {kind!r}: it is 'objects' or 'supports'") from None
+                raise ValueError(
+                    f"kind {kind!r}: it is 'objects', 'supports' or 'bodies'"
+                ) from None
         bits |= kind
-    if not bits:
-        raise ValueError("kinds: ask for 'objects', 'supports' or both")
+    if not bits & (Kinds.OBJECTS | Kinds.SUPPORTS):
+        raise ValueError(
+            "kinds: ask for 'objects', 'supports' or both ('bodies' comes only with them)"
+        )
     if not (max_rate_hz >= 0.0 and np.isfinite(max_rate_hz)):
         raise ValueError(f"max_rate_hz {max_rate_hz}: it is finite and >= 0 (0 for no cap)")
     return Subscribe(
@@ -277,13 +353,15 @@ class Subscriber:
     Each connection starts with a :class:`~tacmesh.wire.Hello`, checked: another protocol
     version raises :class:`VersionMismatch` (naming both versions), a Goodbye instead of it
     raises :class:`Refused` with the daemon's reason. Then the client sends a Subscribe with its
-    options (``encoding`` ``"full"`` or ``"compact"``, ``max_rate_hz``, ``kinds``,
-    ``object_ids``, ``extrapolate``: this client extrapolates poses by their velocity, see
-    :meth:`~tacmesh.wire.Pose.extrapolated`), with ``resend`` when they differ from the defaults: the daemon's first
-    snapshot (under the defaults) is then not yielded, and the scene is taken from the Session
-    that answers the Subscribe. More generally, messages sent under options this client has
-    since replaced (up to the Session of the new options) are skipped, Stats excepted, as are
-    updates of objects outside the filter.
+    options (``encoding`` ``"full"`` or ``"compact"``, ``max_rate_hz``, ``kinds`` (any of
+    ``"objects"``, ``"supports"``, ``"bodies"``; all three by default), ``object_ids``,
+    ``extrapolate``: this client extrapolates poses by their velocity, see
+    :meth:`~tacmesh.wire.Pose.extrapolated`), with ``resend`` when they differ from the
+    defaults: the daemon's first snapshot (under the defaults) is then not yielded, and the
+    scene is taken from the Session that answers the Subscribe. More generally, messages sent
+    under options this client has since replaced (up to the Session of the new options) are
+    skipped, Stats excepted, as are updates of objects outside the filter (and Bodies when
+    bodies are not asked for).
 
     ``scene`` is the :class:`Scene` of everything yielded so far. :meth:`subscribe` changes the
     options (by default with a fresh snapshot), :meth:`resend` asks for a fresh snapshot.
@@ -305,7 +383,7 @@ class Subscriber:
         *,
         encoding: EncodingName = "full",
         max_rate_hz: float = 0.0,
-        kinds: Iterable[KindName] | KindName = ("objects", "supports"),
+        kinds: Iterable[KindName] | KindName = ALL_KINDS,
         object_ids: Iterable[int] = (),
         extrapolate: bool = False,
         reconnect: bool = True,
@@ -501,13 +579,20 @@ class Subscriber:
             if not isinstance(message, (Stats, Goodbye)):
                 self.skipped += 1
                 return None
-        if isinstance(message, (Shape, Pose, Remove)) and not self.options.admits(
-            message.object_id
-        ):
+        if not self._admitted(message):
             # Sent before the daemon read a narrower filter.
             self.filtered += 1
             return None
         return message
+
+    def _admitted(self, message: Message) -> bool:
+        """Whether the current options let ``message`` through (its object, and for a Body
+        whether bodies are asked for)."""
+        if isinstance(message, Body):
+            return self.options.admits_body(message.object_id)
+        if isinstance(message, (Shape, Pose, Remove)):
+            return self.options.admits(message.object_id)
+        return True
 
     def _check_first(self, message: Message) -> None:
         self._expect_hello = False

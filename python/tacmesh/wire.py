@@ -1,4 +1,4 @@
-"""The tacmesh wire protocol, version 2 (docs/protocol.md in the repository): every message
+"""The tacmesh wire protocol, version 3 (docs/protocol.md in the repository): every message
 decoded strictly and encoded.
 
 Every message is one frame: a little-endian ``u32`` length (the kind byte and the payload), a
@@ -7,12 +7,13 @@ document raises a :class:`WireError` subclass naming what is wrong (:class:`Unkn
 :class:`WrongDirection`, :class:`Truncated`, :class:`TrailingBytes`, :class:`InvalidText`,
 :class:`TextTooLong`, :class:`CountOverCap`, :class:`InvalidFlags`, :class:`InvalidEnum`,
 :class:`NonFinite`, :class:`NotUnitQuaternion`, :class:`TimesOutOfOrder`,
-:class:`IndexOutOfRange`, :class:`BadBox`, :class:`InvalidNumber`, :class:`FrameTooLarge`,
-:class:`EmptyFrame`): garbage is never skipped silently.
+:class:`IndexOutOfRange`, :class:`BadBox`, :class:`InvalidNumber`, :class:`BadBody`,
+:class:`BadHull`, :class:`FrameTooLarge`, :class:`EmptyFrame`): garbage is never skipped silently.
 
 Entry points: :class:`FrameDecoder` (bytes in, messages out), :func:`encode` (a message to its
 frame), :func:`encode_subscribe`, and the message dataclasses. Geometry is numpy: vertices
-``float32 (V, 3)`` in the object's frame, triangles ``uint32 (T, 3)``.
+``float32 (V, 3)`` in the object's frame, triangles ``uint32 (T, 3)`` (``uint8`` in a Body's
+hulls, as on the wire).
 """
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ import enum
 import math
 import struct
 from dataclasses import dataclass, field, replace
-from typing import Literal, Union
+from typing import Any, Literal, NamedTuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 #: The protocol version this module speaks.
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 #: Protocol versions this client reads (a Hello of another version is refused).
 SUPPORTED_VERSIONS = frozenset({PROTOCOL_VERSION})
 
@@ -44,6 +45,11 @@ UNIT_QUATERNION_TOLERANCE = 1e-3
 COMPACT_STEPS = 65535
 #: The most vertices a compact Shape may have and still carry u16 indices.
 COMPACT_U16_VERTICES = 65536
+#: The most convex hulls a Body may carry.
+MAX_HULLS = 16
+#: The fewest and the most vertices a hull may have.
+MIN_HULL_VERTICES = 4
+MAX_HULL_VERTICES = 255
 
 KIND_HELLO = 0x01
 KIND_REMOVE = 0x03
@@ -53,6 +59,7 @@ KIND_SESSION = 0x07
 KIND_SHAPE = 0x08
 KIND_POSE = 0x09
 KIND_STATS = 0x0A
+KIND_BODY = 0x0B
 KIND_SUBSCRIBE_V1 = 0x80
 KIND_SUBSCRIBE = 0x81
 #: Kind numbers of version 1 that version 2 retired; never valid again.
@@ -66,6 +73,10 @@ FIRST_PLANE_ID = FIRST_SUPPORT_ID
 #: Shape flags.
 SHAPE_CLOSED = 0x01
 SHAPE_SUPPORT = 0x02
+#: The object's frame is not its earlier shapes' frame: a Body of an earlier version no longer fits.
+SHAPE_NEW_FRAME = 0x04
+#: Every Shape flag this version defines.
+SHAPE_FLAGS = SHAPE_CLOSED | SHAPE_SUPPORT | SHAPE_NEW_FRAME
 #: Subscribe flags.
 SUBSCRIBE_RESEND = 0x01
 SUBSCRIBE_EXTRAPOLATE = 0x02
@@ -73,6 +84,8 @@ SUBSCRIBE_EXTRAPOLATE = 0x02
 #: Fixed sizes, bytes of payload.
 POSE_BYTES = 92
 SHAPE_HEADER_BYTES = 130
+BODY_HEADER_BYTES = 70
+HULL_HEADER_BYTES = 3
 COMPACT_BOX_BYTES = 24
 SUBSCRIBE_HEADER_BYTES = 11
 SESSION_HEADER_BYTES = 16
@@ -129,15 +142,17 @@ class TextTooLong(WireError):
 
 
 class CountOverCap(WireError):
-    """A count over its cap (a Subscribe's ids)."""
+    """A count over its cap (a Subscribe's ids, a Body's hulls)."""
 
 
 class InvalidFlags(WireError):
-    """A flag bit this document does not define (or a ``kinds`` of no kind)."""
+    """A flag bit this document does not define (or a ``kinds`` of neither objects nor
+    support planes)."""
 
 
 class InvalidEnum(WireError):
-    """An enumeration value this document does not define (an encoding other than 0 or 1)."""
+    """An enumeration value this document does not define (an encoding other than 0 or 1, a
+    Body's proxy other than 0, 1 or 2)."""
 
 
 class NonFinite(WireError):
@@ -161,7 +176,17 @@ class BadBox(WireError):
 
 
 class InvalidNumber(WireError):
-    """A residual, rate or latency that is NaN, infinite or negative."""
+    """A residual, rate, latency or margin that is NaN, infinite or negative."""
+
+
+class BadBody(WireError):
+    """A Body whose volume is not finite and positive, or whose proxy breaks its kind's rule
+    (a ``shape`` proxy that carries a mesh)."""
+
+
+class BadHull(WireError):
+    """A hull of a Body with fewer than 4 or more than 255 vertices, or more triangles than
+    twice its vertices."""
 
 
 class StreamEndedInFrame(WireError):
@@ -180,11 +205,24 @@ class Encoding(enum.IntEnum):
 
 
 class Kinds(enum.IntFlag):
-    """Which objects a client is sent: bit 0 objects, bit 1 support planes."""
+    """What a client is sent: bit 0 objects, bit 1 support planes, bit 2 the objects' bodies.
+    At least one of objects and support planes."""
 
     OBJECTS = 1
     SUPPORTS = 2
-    ALL = 3
+    BODIES = 4
+    ALL = 7
+
+
+class BodyProxy(enum.IntEnum):
+    """How a Body's collision proxy was made."""
+
+    #: The Shape is closed and is its own proxy; the Body carries no proxy mesh.
+    SHAPE = 0
+    #: The open shell swept away from the sensor along its rays to the support plane.
+    SHADOW_VOLUME = 1
+    #: The open shell swept straight down onto the support plane (no sensor position known).
+    EXTRUSION = 2
 
 
 Vec3 = tuple[float, float, float]
@@ -223,6 +261,15 @@ class Subscribe:
             return False
         return not self.object_ids or object_id in self.object_ids
 
+    @property
+    def bodies(self) -> bool:
+        """Whether the client asks for Body messages (bit 2 of ``kinds``)."""
+        return bool(self.kinds & Kinds.BODIES)
+
+    def admits_body(self, object_id: int) -> bool:
+        """Whether a Body of this object is sent: bodies asked for, and the object admitted."""
+        return self.bodies and self.admits(object_id)
+
     def same_options(self, other: Subscribe) -> bool:
         """Whether the two ask for the same stream: everything but ``resend`` equal (the ids as
         a set, the rate as the f32 on the wire)."""
@@ -241,8 +288,8 @@ DEFAULT_OPTIONS = Subscribe()
 
 @dataclass(frozen=True)
 class SubscribeV1:
-    """Client → server (0x80): version 1's empty Subscribe. A version-2 server refuses it with
-    a Goodbye; this client never sends it (the encoder is here for tests)."""
+    """Client → server (0x80): version 1's empty Subscribe. A server of version 2 or later
+    refuses it with a Goodbye; this client never sends it (the encoder is here for tests)."""
 
 
 @dataclass(frozen=True)
@@ -347,7 +394,7 @@ class Shape:
     #: Capture time of the newest frame fused into the shape, CLOCK_MONOTONIC ns.
     shape_time_ns: int
     shape_time_realtime_ns: int
-    #: :data:`SHAPE_CLOSED`, :data:`SHAPE_SUPPORT`.
+    #: :data:`SHAPE_CLOSED`, :data:`SHAPE_SUPPORT`, :data:`SHAPE_NEW_FRAME`.
     flags: int
     faces_in: int
     faces_out: int
@@ -375,9 +422,95 @@ class Shape:
         """A support plane (a table or floor), by its flag."""
         return bool(self.flags & SHAPE_SUPPORT)
 
+    @property
+    def is_new_frame(self) -> bool:
+        """The object's frame is not the one its earlier shapes were in: a Body of an earlier
+        version no longer fits."""
+        return bool(self.flags & SHAPE_NEW_FRAME)
+
     def world_vertices(self) -> npt.NDArray[np.float32]:
         """The vertices mapped into the world by the shape's own pose."""
         return self.pose.to_world(self.vertices)
+
+
+class Hull(NamedTuple):
+    """One convex part of a Body, in the object's frame."""
+
+    #: ``float32 (n, 3)``, 4 ≤ n ≤ 255, metres.
+    vertices: npt.NDArray[np.float32]
+    #: ``(t, 3)`` indices below n (``uint8`` as decoded; any unsigned integers to encode),
+    #: t ≤ 2·n, counter-clockwise seen from outside.
+    triangles: npt.NDArray[np.unsignedinteger[Any]]
+
+
+def inertia_matrix(
+    ixx: float, iyy: float, izz: float, ixy: float, ixz: float, iyz: float
+) -> npt.NDArray[np.float32]:
+    """The symmetric ``float32 (3, 3)`` inertia tensor of the six entries in the wire's order
+    (MuJoCo's ``fullinertia``): ``ixy`` is the tensor's entry, ``−∫ x y dV``."""
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], np.float32)
+
+
+def inertia_terms(inertia: npt.ArrayLike) -> tuple[float, float, float, float, float, float]:
+    """The six entries of a ``(3, 3)`` inertia tensor in the wire's order: ``ixx``, ``iyy``,
+    ``izz``, ``ixy``, ``ixz``, ``iyz`` (its diagonal, then its upper triangle)."""
+    m = np.asarray(inertia, dtype=np.float64).reshape(3, 3)
+    return (
+        float(m[0, 0]),
+        float(m[1, 1]),
+        float(m[2, 2]),
+        float(m[0, 1]),
+        float(m[0, 2]),
+        float(m[1, 2]),
+    )
+
+
+def _empty_vertices() -> npt.NDArray[np.float32]:
+    return np.zeros((0, 3), np.float32)
+
+
+def _empty_triangles() -> npt.NDArray[np.uint32]:
+    return np.zeros((0, 3), np.uint32)
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """Server → client (0x0B): an object's collision body, made from the Shape whose version it
+    names: a closed collision proxy, the convex hulls covering it and its mass properties at a
+    density of 1 kg/m³. Everything is in the object's frame (that shape's), placed by the
+    object's current pose.
+
+    For a ``proxy`` of :attr:`BodyProxy.SHAPE` the closed Shape is its own proxy and
+    ``vertices`` and ``triangles`` are empty. A compact Body's proxy is decoded (dequantised)
+    to the same arrays; the hulls are always full precision.
+    """
+
+    object_id: int
+    #: The version of the shape the body was made from.
+    shape_version: int
+    proxy: BodyProxy
+    #: How far the proxy was grown outward from the seen surface, metres (0 for ``SHAPE``).
+    margin_m: float
+    #: The proxy's volume, m³, > 0: its mass in kg per kg/m³ of density.
+    volume_m3: float
+    #: ``float32 (3,)``: the proxy's centre of mass, object frame, metres.
+    centre_of_mass: npt.NDArray[np.float32]
+    #: ``float32 (3, 3)``, symmetric: the inertia tensor about the centre of mass along the
+    #: object frame's axes, kg·m² per kg/m³ (:func:`inertia_matrix` of the wire's six).
+    inertia: npt.NDArray[np.float32]
+    #: ``float32 (V, 3)``: the proxy's vertices, object frame (none for ``SHAPE``).
+    vertices: npt.NDArray[np.float32] = field(default_factory=_empty_vertices)
+    #: ``uint32 (T, 3)``: the proxy's triangles, counter-clockwise seen from outside.
+    triangles: npt.NDArray[np.uint32] = field(default_factory=_empty_triangles)
+    #: At most 16 convex parts whose union covers the proxy.
+    hulls: tuple[Hull, ...] = ()
+    #: How the proxy's vertices and triangles are laid out.
+    encoding: Encoding = Encoding.FULL
+
+    @property
+    def inertia_terms(self) -> tuple[float, float, float, float, float, float]:
+        """``ixx``, ``iyy``, ``izz``, ``ixy``, ``ixz``, ``iyz``, the wire's order."""
+        return inertia_terms(self.inertia)
 
 
 @dataclass(frozen=True)
@@ -441,7 +574,7 @@ class Goodbye:
 
 
 #: What a server sends.
-Message = Union[Hello, Session, Shape, Pose, Remove, SnapshotDone, Stats, Goodbye]
+Message = Union[Hello, Session, Shape, Pose, Body, Remove, SnapshotDone, Stats, Goodbye]
 #: What a client sends.
 ClientMessage = Union[Subscribe, SubscribeV1]
 AnyMessage = Union[Message, ClientMessage]
@@ -457,6 +590,7 @@ _NAMES = {
     KIND_SHAPE: "Shape",
     KIND_POSE: "Pose",
     KIND_STATS: "Stats",
+    KIND_BODY: "Body",
     KIND_SUBSCRIBE_V1: "Subscribe (version 1)",
     KIND_SUBSCRIBE: "Subscribe",
 }
@@ -672,6 +806,20 @@ def _read_pose(r: _Reader) -> Pose:
     return pose
 
 
+def _check_kinds(what: str, kinds: int) -> None:
+    """Subscribe's ``kinds``: only bits 0–2, and at least one of bits 0 and 1."""
+    if kinds & ~int(Kinds.ALL):
+        raise InvalidFlags(
+            f"`kinds` of {what} is 0x{kinds:02x}, but only the bits 0x{int(Kinds.ALL):02x} are "
+            "defined"
+        )
+    if not kinds & int(Kinds.OBJECTS | Kinds.SUPPORTS):
+        raise InvalidFlags(
+            f"`kinds` of {what} is 0x{kinds:02x}: it must ask for objects (bit 0), support "
+            "planes (bit 1) or both; bodies (bit 2) come only with them"
+        )
+
+
 def _read_options(r: _Reader) -> Subscribe:
     encoding = r.u8("encoding")
     if encoding not in (0, 1):
@@ -687,15 +835,7 @@ def _read_options(r: _Reader) -> Subscribe:
         )
     max_rate_hz = r.number("max_rate_hz")
     kinds = r.u8("kinds")
-    if kinds == 0:
-        raise InvalidFlags(
-            f"`kinds` of {r.what} is 0: it must ask for objects (bit 0), support planes "
-            "(bit 1) or both"
-        )
-    if kinds & ~int(Kinds.ALL):
-        raise InvalidFlags(
-            f"`kinds` of {r.what} is 0x{kinds:02x}, but only the bits 0x03 are defined"
-        )
+    _check_kinds(r.what, kinds)
     n = r.u32("id_count")
     if n > MAX_SUBSCRIBE_IDS:
         raise CountOverCap(
@@ -712,82 +852,105 @@ def _read_options(r: _Reader) -> Subscribe:
     )
 
 
-def _read_shape(r: _Reader) -> Shape:
-    pose = _read_pose(r)
-    shape_time_ns = r.u64("shape_time_ns")
-    shape_time_realtime_ns = r.u64("shape_time_realtime_ns")
-    flags = r.u8("flags")
-    if flags & ~(SHAPE_CLOSED | SHAPE_SUPPORT):
-        raise InvalidFlags(
-            f"`flags` of the Shape of object {pose.object_id} is 0x{flags:02x}, but only the "
-            f"bits 0x{SHAPE_CLOSED | SHAPE_SUPPORT:02x} are defined"
-        )
-    faces_in = r.u32("faces_in")
-    faces_out = r.u32("faces_out")
-    max_residual_m = r.number("max_residual_m")
-    encoding_byte = r.u8("encoding")
-    if encoding_byte not in (0, 1):
+def _read_encoding(r: _Reader, what: str) -> Encoding:
+    value = r.u8("encoding")
+    if value not in (0, 1):
         raise InvalidEnum(
-            f"`encoding` of the Shape of object {pose.object_id} is {encoding_byte}, which is "
-            "not a defined value (0 full, 1 compact)"
+            f"`encoding` of {what} is {value}, which is not a defined value (0 full, 1 compact)"
         )
-    encoding = Encoding(encoding_byte)
-    v = r.u32("vertex_count")
-    t = r.u32("triangle_count")
-    # The counts are checked against the payload before any array they size is made.
+    return Encoding(value)
+
+
+def _geometry_bytes(encoding: Encoding, v: int, t: int) -> int:
+    """The bytes of a mesh of ``v`` vertices and ``t`` triangles laid out in ``encoding``."""
     if encoding is Encoding.FULL:
-        geometry = 12 * v + 12 * t
-    else:
-        geometry = COMPACT_BOX_BYTES + 6 * v + (6 if v <= COMPACT_U16_VERTICES else 12) * t
-    if geometry > r.left:
-        raise Truncated(
-            f"Shape of object {pose.object_id}: {v} vertices and {t} triangles "
-            f"({encoding.name.lower()}) take {SHAPE_HEADER_BYTES + geometry} bytes of payload, "
-            f"it has {SHAPE_HEADER_BYTES + r.left}"
-        )
-    if geometry < r.left:
-        raise TrailingBytes(
-            f"Shape of object {pose.object_id}: {v} vertices and {t} triangles "
-            f"({encoding.name.lower()}) take {SHAPE_HEADER_BYTES + geometry} bytes of payload, "
-            f"it has {SHAPE_HEADER_BYTES + r.left}"
-        )
-    what = f"the Shape of object {pose.object_id}"
-    if encoding is Encoding.FULL:
-        vertices = np.frombuffer(r.take(12 * v, "vertices"), dtype="<f4").reshape(v, 3)
-        triangles = np.frombuffer(r.take(12 * t, "triangles"), dtype="<u4").reshape(t, 3)
-        bad = ~np.isfinite(vertices)
-        if bad.any():
-            index = int(np.argwhere(bad)[0][0])
-            raise NonFinite(
-                f"vertex {index} of {what} has a non-finite coordinate "
-                f"({vertices[index].tolist()}): coordinates are finite metres"
-            )
-    else:
-        box_min = np.frombuffer(r.take(12, "box_min"), dtype="<f4")
-        box_max = np.frombuffer(r.take(12, "box_max"), dtype="<f4")
-        _check_finite(what, "box_min", tuple(box_min.tolist()))
-        _check_finite(what, "box_max", tuple(box_max.tolist()))
-        for axis, lo, hi in zip("xyz", box_min.tolist(), box_max.tolist()):
-            if hi < lo:
-                raise BadBox(
-                    f"the compact box of {what} has its {axis} maximum {hi} below its "
-                    f"minimum {lo}"
-                )
-        q = np.frombuffer(r.take(6 * v, "vertices"), dtype="<u2").reshape(v, 3)
-        vertices = dequantise(box_min, box_max, q)
-        if not np.all(np.isfinite(vertices)):
-            raise NonFinite(f"the compact box of {what} spans more than f32 holds")
-        index_type = "<u2" if v <= COMPACT_U16_VERTICES else "<u4"
-        width = 2 if v <= COMPACT_U16_VERTICES else 4
-        triangles = np.frombuffer(r.take(3 * width * t, "triangles"), dtype=index_type)
-        triangles = triangles.reshape(t, 3)
-    r.end()
-    if t and int(triangles.max()) >= v:
+        return 12 * v + 12 * t
+    return COMPACT_BOX_BYTES + 6 * v + (6 if v <= COMPACT_U16_VERTICES else 12) * t
+
+
+def _check_indices(what: str, triangles: npt.NDArray[Any], v: int) -> None:
+    if len(triangles) and int(triangles.max()) >= v:
         row = int(np.argwhere(triangles >= v)[0][0])
         raise IndexOutOfRange(
             f"triangle {row} of {what} uses vertex {int(triangles[row].max())}, but the mesh "
             f"has only {v} vertices"
         )
+
+
+def _check_vertices_finite(what: str, vertices: npt.NDArray[np.float32]) -> None:
+    bad = ~np.isfinite(vertices)
+    if bad.any():
+        index = int(np.argwhere(bad)[0][0])
+        raise NonFinite(
+            f"vertex {index} of {what} has a non-finite coordinate "
+            f"({vertices[index].tolist()}): coordinates are finite metres"
+        )
+
+
+def _read_compact_vertices(r: _Reader, what: str, v: int) -> npt.NDArray[np.float32]:
+    box_min = np.frombuffer(r.take(12, "box_min"), dtype="<f4")
+    box_max = np.frombuffer(r.take(12, "box_max"), dtype="<f4")
+    _check_finite(what, "box_min", tuple(box_min.tolist()))
+    _check_finite(what, "box_max", tuple(box_max.tolist()))
+    for axis, lo, hi in zip("xyz", box_min.tolist(), box_max.tolist()):
+        if hi < lo:
+            raise BadBox(
+                f"the compact box of {what} has its {axis} maximum {hi} below its minimum {lo}"
+            )
+    q = np.frombuffer(r.take(6 * v, "vertices"), dtype="<u2").reshape(v, 3)
+    vertices = dequantise(box_min, box_max, q)
+    if not np.all(np.isfinite(vertices)):
+        raise NonFinite(f"the compact box of {what} spans more than f32 holds")
+    return vertices
+
+
+def _read_geometry(
+    r: _Reader, what: str, encoding: Encoding, v: int, t: int
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+    """A mesh's vertices and triangles as Shape lays them out in ``encoding``, each checked
+    (finite vertices, a well-formed box, indices below ``v``). The caller has checked that the
+    payload holds them."""
+    if encoding is Encoding.FULL:
+        vertices = np.frombuffer(r.take(12 * v, "vertices"), dtype="<f4").reshape(v, 3)
+        _check_vertices_finite(what, vertices)
+        index_type = "<u4"
+    else:
+        vertices = _read_compact_vertices(r, what, v)
+        index_type = "<u2" if v <= COMPACT_U16_VERTICES else "<u4"
+    width = np.dtype(index_type).itemsize
+    triangles = np.frombuffer(r.take(3 * width * t, "triangles"), dtype=index_type)
+    triangles = triangles.reshape(t, 3)
+    _check_indices(what, triangles, v)
+    return vertices.astype(np.float32), triangles.astype(np.uint32)
+
+
+def _read_shape(r: _Reader) -> Shape:
+    pose = _read_pose(r)
+    what = f"the Shape of object {pose.object_id}"
+    shape_time_ns = r.u64("shape_time_ns")
+    shape_time_realtime_ns = r.u64("shape_time_realtime_ns")
+    flags = r.u8("flags")
+    if flags & ~SHAPE_FLAGS:
+        raise InvalidFlags(
+            f"`flags` of {what} is 0x{flags:02x}, but only the bits 0x{SHAPE_FLAGS:02x} are "
+            "defined"
+        )
+    faces_in = r.u32("faces_in")
+    faces_out = r.u32("faces_out")
+    max_residual_m = r.number("max_residual_m")
+    encoding = _read_encoding(r, what)
+    v = r.u32("vertex_count")
+    t = r.u32("triangle_count")
+    # The counts are checked against the payload before any array they size is made.
+    geometry = _geometry_bytes(encoding, v, t)
+    if geometry != r.left:
+        error = Truncated if geometry > r.left else TrailingBytes
+        raise error(
+            f"Shape of object {pose.object_id}: {v} vertices and {t} triangles "
+            f"({encoding.name.lower()}) take {SHAPE_HEADER_BYTES + geometry} bytes of payload, "
+            f"it has {SHAPE_HEADER_BYTES + r.left}"
+        )
+    vertices, triangles = _read_geometry(r, what, encoding, v, t)
     return Shape(
         pose=pose,
         shape_time_ns=shape_time_ns,
@@ -796,8 +959,101 @@ def _read_shape(r: _Reader) -> Shape:
         faces_in=faces_in,
         faces_out=faces_out,
         max_residual_m=max_residual_m,
-        vertices=vertices.astype(np.float32),
-        triangles=triangles.astype(np.uint32),
+        vertices=vertices,
+        triangles=triangles,
+        encoding=encoding,
+    )
+
+
+def _read_proxy(r: _Reader, what: str) -> BodyProxy:
+    value = r.u8("proxy")
+    if value not in {int(proxy) for proxy in BodyProxy}:
+        raise InvalidEnum(
+            f"`proxy` of {what} is {value}, which is not a defined value (0 shape, 1 shadow "
+            "volume, 2 extrusion)"
+        )
+    return BodyProxy(value)
+
+
+def _check_volume(what: str, volume_m3: float) -> None:
+    if not (math.isfinite(volume_m3) and volume_m3 > 0.0):
+        raise BadBody(f"{what} has volume {volume_m3} m³: it must be finite and positive")
+
+
+def _check_proxy_mesh(what: str, proxy: BodyProxy, v: int, t: int) -> None:
+    if proxy is BodyProxy.SHAPE and (v or t):
+        raise BadBody(
+            f"{what} says its shape is its proxy, yet carries a proxy mesh of {v} vertices and "
+            f"{t} triangles (it must carry none)"
+        )
+
+
+def _check_hull_counts(what: str, index: int, n: int, t: int) -> None:
+    if not MIN_HULL_VERTICES <= n <= MAX_HULL_VERTICES or t > 2 * n:
+        raise BadHull(
+            f"hull {index} of {what} has {n} vertices and {t} triangles: a hull has "
+            f"{MIN_HULL_VERTICES} to {MAX_HULL_VERTICES} vertices and at most twice as many "
+            "triangles"
+        )
+
+
+def _check_hull_count(what: str, h: int) -> None:
+    if h > MAX_HULLS:
+        raise CountOverCap(f"{what} has {h} hulls, more than the cap of {MAX_HULLS}")
+
+
+def _read_hull(r: _Reader, what: str, index: int) -> Hull:
+    n = r.u8("hull vertex_count")
+    t = r.u16("hull triangle_count")
+    _check_hull_counts(what, index, n, t)
+    hull = f"hull {index} of {what}"
+    vertices = np.frombuffer(r.take(12 * n, "hull vertices"), dtype="<f4").reshape(n, 3)
+    _check_vertices_finite(hull, vertices)
+    triangles = np.frombuffer(r.take(3 * t, "hull triangles"), dtype=np.uint8).reshape(t, 3)
+    _check_indices(hull, triangles, n)
+    return Hull(vertices.astype(np.float32), triangles.copy())
+
+
+def _read_body(r: _Reader) -> Body:
+    object_id = r.u64("object_id")
+    shape_version = r.u64("shape_version")
+    what = f"the Body of object {object_id}"
+    proxy = _read_proxy(r, what)
+    margin_m = r.f32("margin_m")
+    _check_number(what, "margin_m", margin_m)
+    volume_m3 = r.f32("volume_m3")
+    _check_volume(what, volume_m3)
+    centre_of_mass = r.vec3("centre_of_mass")
+    _check_finite(what, "centre_of_mass", centre_of_mass)
+    inertia: tuple[float, ...] = struct.unpack("<6f", r.take(24, "inertia"))
+    _check_finite(what, "inertia", inertia)
+    encoding = _read_encoding(r, what)
+    v = r.u32("vertex_count")
+    t = r.u32("triangle_count")
+    _check_proxy_mesh(what, proxy, v, t)
+    # The counts are checked against the payload before any array they size is made.
+    geometry = _geometry_bytes(encoding, v, t)
+    if geometry > r.left:
+        raise Truncated(
+            f"Body of object {object_id}: {v} vertices and {t} triangles "
+            f"({encoding.name.lower()}) take {BODY_HEADER_BYTES + geometry} bytes of payload "
+            f"before the hulls, it has {BODY_HEADER_BYTES + r.left}"
+        )
+    vertices, triangles = _read_geometry(r, what, encoding, v, t)
+    h = r.u8("hull_count")
+    _check_hull_count(what, h)
+    hulls = tuple(_read_hull(r, what, index) for index in range(h))
+    return Body(
+        object_id=object_id,
+        shape_version=shape_version,
+        proxy=proxy,
+        margin_m=margin_m,
+        volume_m3=volume_m3,
+        centre_of_mass=np.array(centre_of_mass, np.float32),
+        inertia=inertia_matrix(*inertia),
+        vertices=vertices,
+        triangles=triangles,
+        hulls=hulls,
         encoding=encoding,
     )
 
@@ -880,6 +1136,8 @@ def decode_payload(kind: int, payload: bytes, sender: Sender = "server") -> AnyM
         message = _read_shape(r)
     elif kind == KIND_POSE:
         message = _read_pose(r)
+    elif kind == KIND_BODY:
+        message = _read_body(r)
     elif kind == KIND_REMOVE:
         message = Remove(r.u64("object_id"))
     elif kind == KIND_SNAPSHOT_DONE:
@@ -976,8 +1234,7 @@ def _options_payload(options: Subscribe, what: str, validate: bool) -> bytes:
                 f"{what} lists {len(options.object_ids)} object ids, more than the cap of "
                 f"{MAX_SUBSCRIBE_IDS}"
             )
-        if int(options.kinds) == 0 or int(options.kinds) & ~int(Kinds.ALL):
-            raise InvalidFlags(f"`kinds` of {what} is {int(options.kinds)}: it must be 1, 2 or 3")
+        _check_kinds(what, int(options.kinds))
         if int(options.encoding) not in (0, 1):
             raise InvalidEnum(f"`encoding` of {what} is {int(options.encoding)}")
     return struct.pack(
@@ -1009,37 +1266,58 @@ def _pose_payload(pose: Pose, validate: bool) -> bytes:
     )
 
 
+def _mesh_arrays(
+    vertices: npt.ArrayLike, triangles: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[Any]]:
+    """Vertices as little-endian ``f32 (V, 3)`` and triangles as ``(T, 3)``, for the encoder."""
+    v = np.ascontiguousarray(vertices, dtype="<f4").reshape(-1, 3)
+    t = np.ascontiguousarray(triangles).reshape(-1, 3)
+    return v, t
+
+
+def _check_mesh(what: str, vertices: npt.NDArray[np.float32], triangles: npt.NDArray[Any]) -> None:
+    """What a receiver checks of a mesh: finite vertices, indices below the vertex count."""
+    if not np.all(np.isfinite(vertices)):
+        raise NonFinite(f"a vertex of {what} is NaN or infinite")
+    if len(triangles) and (int(triangles.max()) >= len(vertices) or int(triangles.min()) < 0):
+        raise IndexOutOfRange(
+            f"a triangle of {what} uses vertex {int(triangles.max())}, but the mesh has only "
+            f"{len(vertices)} vertices"
+        )
+
+
+def _geometry_payload(
+    vertices: npt.NDArray[np.float32], triangles: npt.NDArray[Any], encoding: Encoding
+) -> tuple[bytes, float]:
+    """A mesh laid out as Shape's geometry in ``encoding``, and the quantisation bound that
+    layout adds (0 for full)."""
+    if encoding != Encoding.COMPACT:
+        return vertices.tobytes() + triangles.astype("<u4").tobytes(), 0.0
+    box_min, box_max, q = quantise(vertices)
+    width = "<u2" if len(vertices) <= COMPACT_U16_VERTICES else "<u4"
+    geometry = (
+        box_min.astype("<f4").tobytes()
+        + box_max.astype("<f4").tobytes()
+        + q.astype("<u2").tobytes()
+        + triangles.astype(width).tobytes()
+    )
+    return geometry, quantisation_bound_m(box_min, box_max)
+
+
 def _shape_payload(shape: Shape, validate: bool) -> bytes:
     what = f"the Shape of object {shape.object_id}"
-    vertices = np.ascontiguousarray(shape.vertices, dtype="<f4").reshape(-1, 3)
-    triangles = np.ascontiguousarray(shape.triangles).reshape(-1, 3)
-    v, t = len(vertices), len(triangles)
+    vertices, triangles = _mesh_arrays(shape.vertices, shape.triangles)
     if validate:
         _check_number(what, "max_residual_m", shape.max_residual_m)
-        if shape.flags & ~(SHAPE_CLOSED | SHAPE_SUPPORT):
+        if shape.flags & ~SHAPE_FLAGS:
             raise InvalidFlags(f"`flags` of {what} is 0x{shape.flags:02x}")
-        if not np.all(np.isfinite(vertices)):
-            raise NonFinite(f"a vertex of {what} is NaN or infinite")
-        if t and (int(triangles.max()) >= v or int(triangles.min()) < 0):
-            raise IndexOutOfRange(
-                f"a triangle of {what} uses vertex {int(triangles.max())}, but the mesh has "
-                f"only {v} vertices"
-            )
+        _check_mesh(what, vertices, triangles)
+    geometry, bound = _geometry_payload(vertices, triangles, shape.encoding)
     residual = shape.max_residual_m
     if shape.encoding == Encoding.COMPACT:
-        box_min, box_max, q = quantise(vertices)
-        residual = float(np.float32(residual) + np.float32(quantisation_bound_m(box_min, box_max)))
+        residual = float(np.float32(residual) + np.float32(bound))
         if validate:
             _check_number(what, "max_residual_m", residual)
-        width = "<u2" if v <= COMPACT_U16_VERTICES else "<u4"
-        geometry = (
-            box_min.astype("<f4").tobytes()
-            + box_max.astype("<f4").tobytes()
-            + q.astype("<u2").tobytes()
-            + triangles.astype(width).tobytes()
-        )
-    else:
-        geometry = vertices.tobytes() + triangles.astype("<u4").tobytes()
     head = _pose_payload(shape.pose, validate) + struct.pack(
         "<QQBIIfBII",
         shape.shape_time_ns,
@@ -1049,10 +1327,68 @@ def _shape_payload(shape: Shape, validate: bool) -> bytes:
         shape.faces_out,
         residual,
         int(shape.encoding),
-        v,
-        t,
+        len(vertices),
+        len(triangles),
     )
     return head + geometry
+
+
+def _check_body(
+    body: Body, what: str, vertices: npt.NDArray[np.float32], triangles: npt.NDArray[Any]
+) -> None:
+    """What a receiver checks of a Body's fixed fields and proxy mesh, and that its inertia is
+    a symmetric 3 × 3 tensor (the wire carries only its upper triangle)."""
+    if int(body.proxy) not in {int(proxy) for proxy in BodyProxy}:
+        raise InvalidEnum(f"`proxy` of {what} is {int(body.proxy)}")
+    if int(body.encoding) not in (0, 1):
+        raise InvalidEnum(f"`encoding` of {what} is {int(body.encoding)}")
+    _check_number(what, "margin_m", body.margin_m)
+    _check_volume(what, body.volume_m3)
+    centre = np.asarray(body.centre_of_mass, dtype=np.float64).reshape(3)
+    _check_finite(what, "centre_of_mass", tuple(centre.tolist()))
+    inertia = np.asarray(body.inertia, dtype=np.float64)
+    if inertia.shape != (3, 3) or not np.array_equal(inertia, inertia.T):
+        raise ValueError(
+            f"the inertia of {what} is not a symmetric 3 × 3 tensor: {inertia.tolist()}"
+        )
+    _check_finite(what, "inertia", inertia_terms(inertia))
+    _check_proxy_mesh(what, BodyProxy(body.proxy), len(vertices), len(triangles))
+    _check_mesh(what, vertices, triangles)
+
+
+def _hull_payload(hull: Hull, what: str, index: int, validate: bool) -> bytes:
+    vertices, triangles = _mesh_arrays(hull.vertices, hull.triangles)
+    if validate:
+        _check_hull_counts(what, index, len(vertices), len(triangles))
+        _check_mesh(f"hull {index} of {what}", vertices, triangles)
+    head = struct.pack("<BH", len(vertices), len(triangles))
+    return head + vertices.tobytes() + triangles.astype(np.uint8).tobytes()
+
+
+def _body_payload(body: Body, validate: bool) -> bytes:
+    what = f"the Body of object {body.object_id}"
+    vertices, triangles = _mesh_arrays(body.vertices, body.triangles)
+    if validate:
+        _check_body(body, what, vertices, triangles)
+        _check_hull_count(what, len(body.hulls))
+    head = struct.pack(
+        "<QQBff3f6fBII",
+        body.object_id,
+        body.shape_version,
+        int(body.proxy),
+        body.margin_m,
+        body.volume_m3,
+        *np.asarray(body.centre_of_mass, dtype=np.float64).reshape(3).tolist(),
+        *inertia_terms(body.inertia),
+        int(body.encoding),
+        len(vertices),
+        len(triangles),
+    )
+    geometry, _ = _geometry_payload(vertices, triangles, body.encoding)
+    hulls = b"".join(
+        _hull_payload(hull, what, index, validate) for index, hull in enumerate(body.hulls)
+    )
+    return head + geometry + struct.pack("<B", len(body.hulls)) + hulls
 
 
 def _stats_payload(stats: Stats, validate: bool) -> bytes:
@@ -1093,6 +1429,8 @@ def encode_payload(message: AnyMessage, *, validate: bool = True) -> tuple[int, 
         return KIND_SHAPE, _shape_payload(message, validate)
     if isinstance(message, Pose):
         return KIND_POSE, _pose_payload(message, validate)
+    if isinstance(message, Body):
+        return KIND_BODY, _body_payload(message, validate)
     if isinstance(message, Remove):
         return KIND_REMOVE, struct.pack("<Q", message.object_id)
     if isinstance(message, SnapshotDone):
@@ -1112,7 +1450,8 @@ def encode(message: AnyMessage, *, validate: bool = True) -> bytes:
     """``message`` as one frame.
 
     A Shape is laid out in its ``encoding``: compact quantises its vertices to the nearest step
-    of their box and adds the quantisation bound to ``max_residual_m``. With ``validate`` (the
+    of their box and adds the quantisation bound to ``max_residual_m``. A Body's proxy mesh is
+    laid out the same way (a Body has no residual), its hulls always in full. With ``validate`` (the
     default) a message a receiver would refuse raises the :class:`WireError` the decoder would;
     without it the bytes are written as they are (for tests of the refusals).
     """
@@ -1129,5 +1468,6 @@ def encode_subscribe(options: Subscribe = DEFAULT_OPTIONS) -> bytes:
 
 
 def encode_subscribe_v1() -> bytes:
-    """Version 1's empty Subscribe (0x80), which a version-2 server refuses with a Goodbye."""
+    """Version 1's empty Subscribe (0x80), which a server of version 2 or later refuses with a
+    Goodbye."""
     return encode(SubscribeV1())

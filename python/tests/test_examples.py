@@ -17,7 +17,7 @@ import numpy.typing as npt
 import pytest
 
 from tacmesh import Message, Pose, Scene, Session, Shape, SnapshotDone, Stats, Subscriber
-from tacmesh.wire import FIRST_SUPPORT_ID, SHAPE_CLOSED, SHAPE_SUPPORT, Hello
+from tacmesh.wire import FIRST_SUPPORT_ID, PROTOCOL_VERSION, SHAPE_CLOSED, SHAPE_SUPPORT, Hello
 
 from test_daemon import Daemon, daemon  # noqa: F401  (the fixture)
 from test_subscriber import FakeDaemon, Peer, wait_for_close
@@ -153,7 +153,7 @@ def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(tmp_path: 
     import rerun as rr
 
     def script(peer: Peer) -> None:
-        peer.send(Hello(2, "fake"), Session(1, 2), *made_up_shapes(), SnapshotDone())
+        peer.send(Hello(PROTOCOL_VERSION, "fake"), Session(1, 2), *made_up_shapes(), SnapshotDone())
         peer.receive()
         peer.send(pose(1, 1, 200, (-0.25, 0.0, 0.15), 0.5), Stats(monotonic_ns=300))
         peer.send(pose(1, 1, 300, (-0.2, 0.0, 0.15), 0.6), Stats(monotonic_ns=400))

@@ -130,3 +130,16 @@ def test_the_subscribers_scene_of_the_demo_rests_on_its_table(
     moved = np.linalg.norm(np.array(data.xpos)[1:] - start[1:], axis=1)
     assert np.all(moved < 0.01), moved
     assert np.max(np.abs(data.qvel)) < 0.1
+    # Each object is the daemon's published collision body (protocol 3): its mass is that
+    # body's proxy volume at 500 kg/m³, as `subscribe` printed it last ("volume V l").
+    volumes_l: dict[int, float] = {}
+    for line in done.stdout.splitlines():
+        if line.startswith("body object "):
+            object_id = int(line.split()[2])
+            volumes_l[object_id] = float(line.rsplit("volume ", 1)[1].split(" l")[0])
+    assert len(volumes_l) >= 3, done.stdout
+    for object_id, volume_l in volumes_l.items():
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"object-{object_id}")
+        assert body >= 0, f"object {object_id} is not in the scene"
+        # The printed volume is rounded to 0.01 l.
+        assert model.body_mass[body] == pytest.approx(0.5 * volume_l, abs=0.5 * 0.006), object_id

@@ -1,5 +1,5 @@
 """The Subscriber against a scripted fake daemon: the Hello check, the Subscribe it sends and
-the snapshot it takes the scene from, changing options, reconnection."""
+the snapshot it takes the scene from, bodies, changing options, reconnection."""
 
 from __future__ import annotations
 
@@ -15,9 +15,13 @@ import pytest
 
 from tacmesh import (
     DEFAULT_OPTIONS,
+    PROTOCOL_VERSION,
+    Body,
+    BodyProxy,
     Encoding,
     Goodbye,
     Hello,
+    Hull,
     Kinds,
     Pose,
     Refused,
@@ -38,9 +42,10 @@ from tacmesh.wire import (
     FrameDecoder,
     UnknownKind,
     encode,
+    inertia_matrix,
 )
 
-HELLO = Hello(2, "fake tacmesh")
+HELLO = Hello(PROTOCOL_VERSION, "fake tacmesh")
 
 
 def shape(object_id: int, version: int = 1, encoding: Encoding = Encoding.FULL) -> Shape:
@@ -56,6 +61,24 @@ def shape(object_id: int, version: int = 1, encoding: Encoding = Encoding.FULL) 
         vertices=np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]], np.float32),
         triangles=np.array([[0, 1, 2]], np.uint32),
         encoding=encoding,
+    )
+
+
+def body(object_id: int, version: int = 1) -> Body:
+    """A tetrahedron's shadow volume, its own single hull."""
+    vertices = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], np.float32)
+    triangles = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], np.uint32)
+    return Body(
+        object_id=object_id,
+        shape_version=version,
+        proxy=BodyProxy.SHADOW_VOLUME,
+        margin_m=0.0,
+        volume_m3=1e-3 / 6,
+        centre_of_mass=np.full(3, 0.025, np.float32),
+        inertia=inertia_matrix(1e-5, 1e-5, 1e-5, 0.0, 0.0, 0.0),
+        vertices=vertices,
+        triangles=triangles,
+        hulls=(Hull(vertices, triangles.astype(np.uint8)),),
     )
 
 
@@ -139,7 +162,14 @@ def wait_for_close(peer: Peer) -> None:
 
 def test_a_server_of_another_version_is_refused_saying_both_versions(sock: Path) -> None:
     daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(9, "tacmesh 9")))
-    with pytest.raises(VersionMismatch, match=r"version 9.*version 2"):
+    with pytest.raises(VersionMismatch, match=r"version 9.*version 3"):
+        next(iter(Subscriber(sock, reconnect=False, timeout_s=5)))
+    daemon.join()
+
+
+def test_a_version_2_server_is_refused(sock: Path) -> None:
+    daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(2, "tacmesh 0.1.0")))
+    with pytest.raises(VersionMismatch, match=r"version 2; this client speaks version 3"):
         next(iter(Subscriber(sock, reconnect=False, timeout_s=5)))
     daemon.join()
 
@@ -245,7 +275,7 @@ def test_changing_options_and_asking_for_a_resend_mid_stream(sock: Path) -> None
                 assert set(sub.scene.objects) == {FIRST_SUPPORT_ID}
             if isinstance(message, Shape) and message.object_id == FIRST_SUPPORT_ID:
                 if message.shape_version == 2:
-                    sub.subscribe(kinds=("objects", "supports"), object_ids=[1, 2])
+                    sub.subscribe(kinds=("objects", "supports", "bodies"), object_ids=[1, 2])
             session = sub.scene.session
             if isinstance(message, SnapshotDone) and session and session.monotonic_ns == 5:
                 break
@@ -253,6 +283,48 @@ def test_changing_options_and_asking_for_a_resend_mid_stream(sock: Path) -> None
     assert set(sub.scene.objects) == {1, 2} and sub.scene.complete
     assert sub.scene.objects[2].shape_version == 1
     assert (sub.skipped, sub.filtered) == (1, 1)
+
+
+def test_bodies_are_asked_for_by_default_and_kept_beside_their_shapes(sock: Path) -> None:
+    def script(peer: Peer) -> None:
+        peer.send(HELLO, Session(1, 2), shape(1), body(1), shape(2), SnapshotDone())
+        assert peer.receive() == DEFAULT_OPTIONS
+        assert DEFAULT_OPTIONS.kinds is Kinds.ALL and int(DEFAULT_OPTIONS.kinds) == 7
+        peer.send(body(9), Stats())  # of an object the client does not hold: stale
+
+    daemon = FakeDaemon(sock, script)
+    with Subscriber(sock, reconnect=False, timeout_s=5) as sub:
+        seen = [type(m) for m in sub]
+    daemon.join()
+    assert seen == [Hello, Session, Shape, Body, Shape, SnapshotDone, Body, Stats]
+    held = sub.scene.objects[1]
+    assert held.body is not None and held.body.volume_m3 == pytest.approx(1e-3 / 6)
+    proxy = held.world_proxy
+    assert proxy is not None
+    # The shape's pose, a translation by (1, 0, 0), places the body too.
+    np.testing.assert_allclose(proxy.vertices, held.body.vertices + [1, 0, 0], atol=1e-7)
+    assert sub.scene.objects[2].body is None and sub.scene.stale == 1
+
+
+def test_a_client_that_stops_asking_for_bodies_forgets_them(sock: Path) -> None:
+    without_bodies = Subscribe(kinds=Kinds.OBJECTS | Kinds.SUPPORTS)
+
+    def script(peer: Peer) -> None:
+        peer.send(HELLO, Session(1, 2), shape(1), body(1), SnapshotDone())
+        assert peer.receive() == DEFAULT_OPTIONS
+        assert peer.receive() == without_bodies
+        # Sent before the server read the new options: not taken.
+        peer.send(body(1, 1), Stats())
+
+    daemon = FakeDaemon(sock, script)
+    with Subscriber(sock, reconnect=False, timeout_s=5) as sub:
+        for message in sub:
+            if isinstance(message, SnapshotDone):
+                assert sub.scene.objects[1].body is not None
+                sub.subscribe(kinds=("objects", "supports"), resend=False)
+                assert sub.scene.objects[1].body is None
+    daemon.join()
+    assert sub.filtered == 1 and sub.scene.objects[1].body is None
 
 
 def test_resend_asks_for_a_fresh_snapshot_of_the_same_options(sock: Path) -> None:
@@ -323,5 +395,11 @@ def test_options_are_checked() -> None:
         Subscriber("/nonexistent", encoding="small")
     with pytest.raises(ValueError, match="objects"):
         Subscriber("/nonexistent", kinds=())
+    with pytest.raises(ValueError, match="'bodies' comes only with them"):
+        Subscriber("/nonexistent", kinds="bodies")
+    with pytest.raises(ValueError, match="'objects', 'supports' or 'bodies'"):
+        Subscriber("/nonexistent", kinds="hulls")
+    assert Subscriber("/nonexistent").options == DEFAULT_OPTIONS
+    assert Subscriber("/nonexistent", kinds=("supports", "bodies")).options.kinds == 6
     with pytest.raises(ValueError, match="max_rate_hz"):
         Subscriber("/nonexistent", max_rate_hz=-1)

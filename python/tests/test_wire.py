@@ -1,6 +1,6 @@
-"""The codec against the examples of docs/protocol.md byte for byte, round trips of every
-message, the compact encoding's bound, every refusal of the document's list, and the scene
-rules."""
+"""The codec against the examples of docs/protocol.md byte for byte (the Body example against
+golden bytes computed from its layout table), round trips of every message, the compact
+encoding's bound, every refusal of the document's list, and the scene rules."""
 
 from __future__ import annotations
 
@@ -19,10 +19,17 @@ from tacmesh.wire import (
     DEFAULT_OPTIONS,
     FIRST_SUPPORT_ID,
     MAX_FRAME_BYTES,
+    MAX_HULLS,
+    PROTOCOL_VERSION,
     SHAPE_CLOSED,
+    SHAPE_NEW_FRAME,
     SHAPE_SUPPORT,
     AnyMessage,
+    BadBody,
     BadBox,
+    BadHull,
+    Body,
+    BodyProxy,
     CountOverCap,
     EmptyFrame,
     Encoding,
@@ -30,6 +37,7 @@ from tacmesh.wire import (
     FrameTooLarge,
     Goodbye,
     Hello,
+    Hull,
     IndexOutOfRange,
     InvalidEnum,
     InvalidFlags,
@@ -59,6 +67,7 @@ from tacmesh.wire import (
     encode,
     encode_subscribe,
     encode_subscribe_v1,
+    inertia_matrix,
     quantisation_bound_m,
 )
 
@@ -100,8 +109,9 @@ def test_the_documents_remove_snapshot_done_and_goodbye() -> None:
 
 
 def test_the_documents_subscribe() -> None:
-    data = bytes.fromhex("0c000000 81 01 01 00002041 03 00000000")
+    data = bytes.fromhex("0c000000 81 01 01 00002041 07 00000000")
     options = Subscribe(Encoding.COMPACT, resend=True, max_rate_hz=10.0, kinds=Kinds.ALL)
+    assert Kinds.ALL == Kinds.OBJECTS | Kinds.SUPPORTS | Kinds.BODIES == 7
     assert encode_subscribe(options) == data
     assert one(data, "client") == options
     # Version 1's empty Subscribe, which this client never sends.
@@ -158,8 +168,8 @@ def hex_examples(text: str) -> list[bytes]:
 
 def test_every_byte_example_in_the_document_decodes_and_encodes_back() -> None:
     examples = hex_examples(DOC.read_text(encoding="utf-8"))
-    # Hello, Shape (full and compact), Pose, Remove, SnapshotDone, Goodbye, Subscribe.
-    assert len(examples) >= 8, examples
+    # Hello, Shape (full and compact), Pose, Body, Remove, SnapshotDone, Goodbye, Subscribe.
+    assert len(examples) >= 9, examples
     kinds = set()
     for data in examples:
         sender: Sender = "client" if data[4] >= 0x80 else "server"
@@ -174,7 +184,7 @@ def test_every_byte_example_in_the_document_decodes_and_encodes_back() -> None:
             assert again[residual + 4 :] == data[residual + 4 :]
         else:
             assert encode(message) == data, (message, data.hex(" "))
-    assert {Hello, Remove, SnapshotDone, Goodbye, Subscribe, Pose, Shape} <= kinds
+    assert {Hello, Remove, SnapshotDone, Goodbye, Subscribe, Pose, Shape, Body} <= kinds
 
 
 DOC_POSE = Pose(
@@ -229,6 +239,141 @@ def test_the_documents_shape_in_both_encodings() -> None:
     assert quantisation_bound_m((0, 0, -2), (1, 1, 0)) == pytest.approx(1.93e-5, abs=5e-8)
     # In the world, by the Pose example's pose (a translation by (1, 0, −2)).
     np.testing.assert_array_equal(shape.world_vertices(), [[1, 0, -2], [2, 0, -2], [1, 1, -4]])
+
+
+# ---- the Body example ------------------------------------------------------------------------
+
+#: The Body example of docs/protocol.md, 235 bytes, 16 a row, computed by hand from the
+#: document's layout table. If the reference implementation's golden bytes differ, paste its hex
+#: here (any spacing and line breaks): every test of the example reads it from this constant.
+BODY_EXAMPLE_HEX = """
+e7 00 00 00 0b 07 00 00 00 00 00 00 00 02 00 00
+00 00 00 00 00 01 00 00 80 3e ab aa 2a 3e 00 00
+80 3e 00 00 80 3e 00 00 80 3e cd cc 4c 3c cd cc
+4c 3c cd cc 4c 3c 89 88 08 3b 89 88 08 3b 89 88
+08 3b 00 04 00 00 00 04 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 02
+00 00 00 01 00 00 00 00 00 00 00 01 00 00 00 03
+00 00 00 01 00 00 00 02 00 00 00 03 00 00 00 00
+00 00 00 03 00 00 00 02 00 00 00 01 04 04 00 00
+00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
+00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
+00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
+02 01 00 01 03 01 02 03 00 03 02
+"""
+BODY_EXAMPLE = bytes.fromhex("".join(BODY_EXAMPLE_HEX.split()))
+
+TETRAHEDRON = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+TETRAHEDRON_FACES = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], np.uint32)
+DOC_BODY = Body(
+    object_id=7,
+    shape_version=2,
+    proxy=BodyProxy.SHADOW_VOLUME,
+    margin_m=0.25,
+    volume_m3=float(np.float32(1 / 6)),
+    centre_of_mass=np.array([0.25, 0.25, 0.25], np.float32),
+    inertia=inertia_matrix(1 / 80, 1 / 80, 1 / 80, 1 / 480, 1 / 480, 1 / 480),
+    vertices=TETRAHEDRON,
+    triangles=TETRAHEDRON_FACES,
+    hulls=(Hull(TETRAHEDRON, TETRAHEDRON_FACES.astype(np.uint8)),),
+)
+
+
+def same_body(a: Body, b: Body) -> None:
+    """Every field of the two Bodies equal (the arrays element by element)."""
+    assert (a.object_id, a.shape_version, a.proxy, a.encoding) == (
+        b.object_id,
+        b.shape_version,
+        b.proxy,
+        b.encoding,
+    )
+    assert (a.margin_m, a.volume_m3) == (b.margin_m, b.volume_m3)
+    np.testing.assert_array_equal(a.centre_of_mass, b.centre_of_mass)
+    np.testing.assert_array_equal(a.inertia, b.inertia)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    assert len(a.hulls) == len(b.hulls)
+    for mine, theirs in zip(a.hulls, b.hulls):
+        np.testing.assert_array_equal(mine.vertices, theirs.vertices)
+        np.testing.assert_array_equal(mine.triangles, theirs.triangles)
+
+
+def test_the_body_example_golden_bytes_follow_the_layout_table() -> None:
+    """The golden bytes, rebuilt field by field from the document's table: if a pasted hex
+    differs, this says which field."""
+    f4 = struct.Struct("<f")
+    fields_in_order = [
+        ("length", struct.pack("<I", 231)),
+        ("kind", b"\x0b"),
+        ("object_id", struct.pack("<Q", 7)),
+        ("shape_version", struct.pack("<Q", 2)),
+        ("proxy", b"\x01"),
+        ("margin_m", f4.pack(0.25)),
+        ("volume_m3", f4.pack(1 / 6)),
+        ("centre_of_mass", struct.pack("<3f", 0.25, 0.25, 0.25)),
+        ("inertia", struct.pack("<6f", *[1 / 80] * 3, *[1 / 480] * 3)),
+        ("encoding", b"\x00"),
+        ("vertex_count", struct.pack("<I", 4)),
+        ("triangle_count", struct.pack("<I", 4)),
+        ("vertices", TETRAHEDRON.astype("<f4").tobytes()),
+        ("triangles", TETRAHEDRON_FACES.astype("<u4").tobytes()),
+        ("hull_count", b"\x01"),
+        ("hull vertex_count", b"\x04"),
+        ("hull triangle_count", struct.pack("<H", 4)),
+        ("hull vertices", TETRAHEDRON.astype("<f4").tobytes()),
+        ("hull triangles", TETRAHEDRON_FACES.astype(np.uint8).tobytes()),
+    ]
+    at = 0
+    for name, expected in fields_in_order:
+        got = BODY_EXAMPLE[at : at + len(expected)]
+        assert got == expected, f"`{name}` at frame offset {at}: {got.hex(' ')}"
+        at += len(expected)
+    assert at == len(BODY_EXAMPLE) == 235
+    # The stored values, as the document gives them.
+    assert f4.unpack(f4.pack(1 / 6))[0] == pytest.approx(1 / 6, rel=1e-7)
+    assert BODY_EXAMPLE[26:30].hex(" ") == "ab aa 2a 3e"
+    assert BODY_EXAMPLE[42:46].hex(" ") == "cd cc 4c 3c"  # 1/80
+    assert BODY_EXAMPLE[54:58].hex(" ") == "89 88 08 3b"  # 1/480
+
+
+def test_the_body_example_encodes_and_decodes() -> None:
+    assert encode(DOC_BODY).hex(" ") == BODY_EXAMPLE.hex(" ")
+    body = one(BODY_EXAMPLE)
+    assert isinstance(body, Body)
+    same_body(body, DOC_BODY)
+    assert body.proxy is BodyProxy.SHADOW_VOLUME and body.encoding is Encoding.FULL
+    assert body.centre_of_mass.dtype == np.float32 and body.centre_of_mass.shape == (3,)
+    assert body.inertia.shape == (3, 3) and np.array_equal(body.inertia, body.inertia.T)
+    assert body.inertia_terms == pytest.approx((1 / 80,) * 3 + (1 / 480,) * 3, rel=1e-6)
+    assert body.triangles.dtype == np.uint32
+    (hull,) = body.hulls
+    assert hull.vertices.dtype == np.float32 and hull.triangles.dtype == np.uint8
+
+
+def test_the_documents_body_example_is_the_golden_frame() -> None:
+    bodies = [f for f in hex_examples(DOC.read_text(encoding="utf-8")) if f[4] == 0x0B]
+    assert [b.hex(" ") for b in bodies] == [BODY_EXAMPLE.hex(" ")]
+
+
+def test_the_body_examples_mass_properties_are_the_tetrahedrons() -> None:
+    """Volume, centre of mass and inertia of the example's tetrahedron, by the divergence
+    theorem over its faces: the document's numbers, with ``ixy`` = −∫ x y dV."""
+    volume, first, second = 0.0, np.zeros(3), np.zeros((3, 3))
+    for face in TETRAHEDRON_FACES:
+        a, b, c = (TETRAHEDRON[i].astype(np.float64) for i in face)
+        # The signed tetrahedron from the origin to the face.
+        v = float(np.dot(a, np.cross(b, c))) / 6
+        volume += v
+        first += v * (a + b + c) / 4
+        second += v / 20 * (np.outer(a + b + c, a + b + c) + sum(np.outer(p, p) for p in (a, b, c)))
+    centre = first / volume
+    about_centre = second - volume * np.outer(centre, centre)
+    inertia = np.trace(about_centre) * np.eye(3) - about_centre
+    assert volume == pytest.approx(DOC_BODY.volume_m3, rel=1e-6)
+    np.testing.assert_allclose(centre, DOC_BODY.centre_of_mass, rtol=1e-6)
+    np.testing.assert_allclose(inertia, DOC_BODY.inertia, rtol=1e-6)
 
 
 # ---- round trips -----------------------------------------------------------------------------
@@ -324,9 +469,12 @@ def test_server_messages_round_trip(message: AnyMessage) -> None:
     [
         DEFAULT_OPTIONS,
         Subscribe(Encoding.COMPACT, True, 10.0, Kinds.OBJECTS, tuple(range(1, 1025)), True),
+        Subscribe(kinds=Kinds.OBJECTS | Kinds.BODIES),
+        Subscribe(kinds=Kinds.SUPPORTS | Kinds.BODIES),
+        Subscribe(kinds=Kinds.OBJECTS | Kinds.SUPPORTS),
         SubscribeV1(),
     ],
-    ids=["default", "everything", "v1"],
+    ids=["default", "everything", "objects and bodies", "supports and bodies", "no bodies", "v1"],
 )
 def test_client_messages_round_trip(message: AnyMessage) -> None:
     assert one(encode(message), "client") == message
@@ -341,6 +489,107 @@ def test_the_layouts_have_the_documents_sizes() -> None:
     v, t = len(shape.vertices), len(shape.triangles)
     assert len(encode(shape)) == 5 + 130 + 12 * v + 12 * t
     assert len(encode(replace(shape, encoding=Encoding.COMPACT))) == 5 + 154 + 6 * v + 6 * t
+    body = a_body()
+    v, t = len(body.vertices), len(body.triangles)
+    hulls = sum(3 + 12 * len(h.vertices) + 3 * len(h.triangles) for h in body.hulls)
+    assert len(encode(body)) == 5 + 70 + 12 * v + 12 * t + 1 + hulls
+    compact = replace(body, encoding=Encoding.COMPACT)
+    assert len(encode(compact)) == 5 + 70 + 24 + 6 * v + 6 * t + 1 + hulls
+
+
+def a_hull(n: int, seed: int) -> Hull:
+    """A hull of ``n`` vertices and ``2n − 4`` triangles (the counts of a closed convex one; the
+    faces themselves are made up)."""
+    rng = np.random.default_rng(seed)
+    vertices = (rng.random((n, 3)) * 0.1).astype(np.float32)
+    triangles = rng.integers(0, n, (2 * n - 4, 3)).astype(np.uint8)
+    return Hull(vertices, triangles)
+
+
+def a_body(
+    encoding: Encoding = Encoding.FULL,
+    proxy: BodyProxy = BodyProxy.EXTRUSION,
+    object_id: int = 7,
+    version: int = 3,
+) -> Body:
+    vertices, triangles = a_mesh(300, seed=2)
+    return Body(
+        object_id=object_id,
+        shape_version=version,
+        proxy=proxy,
+        margin_m=f32(0.002),
+        volume_m3=f32(1.5e-3),
+        centre_of_mass=np.array([0.01, -0.02, 0.15], np.float32),
+        inertia=inertia_matrix(2e-5, 3e-5, 1.5e-5, -1e-6, 2e-7, 0.0),
+        vertices=vertices,
+        triangles=triangles,
+        hulls=(a_hull(4, 1), a_hull(40, 2), a_hull(255, 3)),
+        encoding=encoding,
+    )
+
+
+def test_a_full_body_round_trips_exactly() -> None:
+    body = a_body()
+    back = one(encode(body))
+    assert isinstance(back, Body)
+    same_body(back, body)
+    assert back.proxy is BodyProxy.EXTRUSION
+    assert back.inertia_terms == pytest.approx((2e-5, 3e-5, 1.5e-5, -1e-6, 2e-7, 0.0), rel=1e-6)
+
+
+def test_a_compact_body_moves_its_proxy_by_at_most_the_bound_and_its_hulls_not_at_all() -> None:
+    body = a_body(Encoding.COMPACT)
+    back = one(encode(body))
+    assert isinstance(back, Body) and back.encoding is Encoding.COMPACT
+    bound = quantisation_bound_m(body.vertices.min(axis=0), body.vertices.max(axis=0))
+    moved = np.linalg.norm(back.vertices.astype(np.float64) - body.vertices, axis=1)
+    assert 0 < float(moved.max()) <= bound
+    # All the rest is exact: the fixed fields, the indices and the full-precision hulls.
+    same_body(back, replace(body, vertices=back.vertices))
+
+
+@pytest.mark.parametrize("encoding", list(Encoding), ids=lambda e: e.name.lower())
+def test_a_body_whose_shape_is_its_proxy_carries_no_mesh(encoding: Encoding) -> None:
+    body = replace(
+        a_body(encoding, BodyProxy.SHAPE),
+        margin_m=0.0,
+        vertices=np.zeros((0, 3), np.float32),
+        triangles=np.zeros((0, 3), np.uint32),
+    )
+    data = encode(body)
+    hulls = sum(3 + 12 * len(h.vertices) + 3 * len(h.triangles) for h in body.hulls)
+    assert len(data) == 5 + 70 + (24 if encoding is Encoding.COMPACT else 0) + 1 + hulls
+    back = one(data)
+    assert isinstance(back, Body) and back.proxy is BodyProxy.SHAPE
+    assert back.vertices.shape == (0, 3) and back.triangles.shape == (0, 3)
+    same_body(back, body)
+
+
+def test_a_body_at_its_caps_round_trips() -> None:
+    """16 hulls of 255 vertices and 510 triangles each, the most a Body may carry."""
+    hull = Hull(a_hull(255, 4).vertices, np.resize(a_hull(255, 4).triangles, (510, 3)))
+    body = replace(a_body(), hulls=(hull,) * MAX_HULLS)
+    back = one(encode(body))
+    assert isinstance(back, Body)
+    same_body(back, body)
+
+
+def test_hull_triangles_may_be_given_as_any_unsigned_integers() -> None:
+    wide = replace(
+        DOC_BODY,
+        hulls=tuple(Hull(h.vertices, h.triangles.astype(np.uint32)) for h in DOC_BODY.hulls),
+    )
+    assert encode(wide) == BODY_EXAMPLE
+
+
+def test_a_shape_says_new_frame_in_its_flags() -> None:
+    shape = a_shape(n=10, flags=SHAPE_CLOSED | SHAPE_NEW_FRAME)
+    data = encode(shape)
+    assert data[5 + 108] == 0x05
+    back = one(data)
+    assert isinstance(back, Shape)
+    assert back.is_new_frame and back.is_closed and not back.is_support
+    assert not a_shape(n=10).is_new_frame
 
 
 def test_a_full_shape_round_trips_exactly() -> None:
@@ -447,6 +696,7 @@ def test_a_message_split_anywhere_comes_out_whole() -> None:
         encode(Hello(2, "tacmesh"))
         + encode(Session(1, 2))
         + encode(a_shape(Encoding.COMPACT, n=20))
+        + encode(a_body(Encoding.COMPACT))
         + encode(a_pose())
         + encode(SnapshotDone())
     )
@@ -456,7 +706,7 @@ def test_a_message_split_anywhere_comes_out_whole() -> None:
         decoder.push(bytes([byte]))
         while (message := decoder.next_message()) is not None:
             out.append(type(message))
-    assert out == [Hello, Session, Shape, Pose, SnapshotDone]
+    assert out == [Hello, Session, Shape, Body, Pose, SnapshotDone]
     assert decoder.buffered == 0
 
 
@@ -501,6 +751,12 @@ COMPACT = encode(a_shape(Encoding.COMPACT, n=10))
 POSE = encode(a_pose())
 # Frame offsets of Shape fields: 5 + the payload offset.
 FLAGS, ENCODING, RESIDUAL, BOX = 5 + 108, 5 + 121, 5 + 117, 5 + 130
+# Frame offsets in the Body example (4 vertices, 4 triangles, full; one hull of 4 and 4).
+B_PROXY, B_MARGIN, B_VOLUME, B_CENTRE, B_INERTIA = 5 + 16, 5 + 17, 5 + 21, 5 + 25, 5 + 37
+B_ENCODING, B_VERTEX_COUNT, B_VERTICES, B_TRIANGLES = 5 + 61, 5 + 62, 5 + 70, 5 + 118
+B_HULL_COUNT, B_HULL = 5 + 166, 5 + 167
+B_HULL_VERTICES, B_HULL_TRIANGLES = B_HULL + 3, B_HULL + 3 + 48
+COMPACT_BODY = encode(replace(DOC_BODY, encoding=Encoding.COMPACT))
 
 
 def unchecked(message: AnyMessage) -> bytes:
@@ -547,7 +803,7 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         unchecked(Session(0, 0, Subscribe(object_ids=tuple(range(1025))))),
         CountOverCap,
     ),
-    ("a Shape flag not defined", patched(SHAPE, FLAGS, b"\x04"), InvalidFlags),
+    ("a Shape flag not defined", patched(SHAPE, FLAGS, b"\x08"), InvalidFlags),
     ("a Shape encoding not defined", patched(SHAPE, ENCODING, b"\x02"), InvalidEnum),
     (
         "a Session encoding not defined",
@@ -556,7 +812,12 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ),
     ("a Session flag not defined", patched(encode(Session(0, 0)), 5 + 17, b"\x04"), InvalidFlags),
     ("a Session of no kinds", patched(encode(Session(0, 0)), 5 + 22, b"\x00"), InvalidFlags),
-    ("a Session kind not defined", patched(encode(Session(0, 0)), 5 + 22, b"\x07"), InvalidFlags),
+    ("a Session kind not defined", patched(encode(Session(0, 0)), 5 + 22, b"\x0f"), InvalidFlags),
+    (
+        "a Session of bodies alone",
+        patched(encode(Session(0, 0)), 5 + 22, b"\x04"),
+        InvalidFlags,
+    ),
     (
         "a NaN vertex",
         unchecked(replace(a_shape(n=10), vertices=np.full((10, 3), NAN, np.float32))),
@@ -625,6 +886,81 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         unchecked(Stats(stages=(StageLatency("mesh", 1.0, INF),))),
         InvalidNumber,
     ),
+    # The Body's rules.
+    ("a short Body", frame(0x0B, BODY_EXAMPLE[5:60]), Truncated),
+    ("a Body cut inside its hull", shorter(BODY_EXAMPLE), Truncated),
+    ("a Body longer than its hulls", longer(BODY_EXAMPLE), TrailingBytes),
+    (
+        "a Body whose proxy counts exceed its payload",
+        patched(BODY_EXAMPLE, B_VERTEX_COUNT, struct.pack("<I", 10**9)),
+        Truncated,
+    ),
+    (
+        "a Body with more hulls than it carries",
+        patched(BODY_EXAMPLE, B_HULL_COUNT, b"\x02"),
+        Truncated,
+    ),
+    ("a Body proxy not defined", patched(BODY_EXAMPLE, B_PROXY, b"\x03"), InvalidEnum),
+    ("a Body encoding not defined", patched(BODY_EXAMPLE, B_ENCODING, b"\x02"), InvalidEnum),
+    (
+        "a shape proxy that carries a mesh",
+        patched(BODY_EXAMPLE, B_PROXY, b"\x00"),
+        BadBody,
+    ),
+    ("a zero volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", 0.0)), BadBody),
+    ("a negative volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", -1.0)), BadBody),
+    ("a NaN volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", NAN)), BadBody),
+    ("an infinite volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", INF)), BadBody),
+    ("a negative margin", patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", -0.1)), InvalidNumber),
+    ("a NaN margin", patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", NAN)), InvalidNumber),
+    (
+        "a NaN centre of mass",
+        patched(BODY_EXAMPLE, B_CENTRE + 4, struct.pack("<f", NAN)),
+        NonFinite,
+    ),
+    (
+        "an infinite inertia",
+        patched(BODY_EXAMPLE, B_INERTIA + 16, struct.pack("<f", -INF)),
+        NonFinite,
+    ),
+    (
+        "a NaN proxy vertex",
+        patched(BODY_EXAMPLE, B_VERTICES + 12 * 3 + 8, struct.pack("<f", NAN)),
+        NonFinite,
+    ),
+    (
+        "a proxy triangle index out of range",
+        patched(BODY_EXAMPLE, B_TRIANGLES + 4, struct.pack("<I", 4)),
+        IndexOutOfRange,
+    ),
+    (
+        "a compact proxy box whose maximum is below its minimum",
+        patched(COMPACT_BODY, B_VERTICES + 12 + 4, struct.pack("<f", -1.0)),
+        BadBox,
+    ),
+    (
+        "a compact proxy's NaN box",
+        patched(COMPACT_BODY, B_VERTICES, struct.pack("<f", NAN)),
+        NonFinite,
+    ),
+    ("17 hulls", patched(BODY_EXAMPLE, B_HULL_COUNT, b"\x11"), CountOverCap),
+    ("a hull of 3 vertices", patched(BODY_EXAMPLE, B_HULL, b"\x03"), BadHull),
+    ("a hull of no vertices", patched(BODY_EXAMPLE, B_HULL, b"\x00"), BadHull),
+    (
+        "a hull of more triangles than twice its vertices",
+        patched(BODY_EXAMPLE, B_HULL + 1, struct.pack("<H", 9)),
+        BadHull,
+    ),
+    (
+        "an infinite hull vertex",
+        patched(BODY_EXAMPLE, B_HULL_VERTICES + 4, struct.pack("<f", INF)),
+        NonFinite,
+    ),
+    (
+        "a hull triangle index out of range",
+        patched(BODY_EXAMPLE, B_HULL_TRIANGLES + 11, b"\x04"),
+        IndexOutOfRange,
+    ),
 ]
 
 
@@ -641,6 +977,7 @@ def test_a_frame_that_breaks_the_rules_is_refused(
 
 CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("a server's Hello", encode(Hello(2, "x")), WrongDirection),
+    ("a server's Body", BODY_EXAMPLE, WrongDirection),
     ("a Subscribe over its length", longer(encode(DEFAULT_OPTIONS)), TrailingBytes),
     ("a short Subscribe", shorter(encode(DEFAULT_OPTIONS)), Truncated),
     ("a version 1 Subscribe with a payload", frame(0x80, b"\x00"), TrailingBytes),
@@ -652,6 +989,8 @@ CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("an encoding not defined", patched(encode(DEFAULT_OPTIONS), 5, b"\x02"), InvalidEnum),
     ("a flag not defined", patched(encode(DEFAULT_OPTIONS), 6, b"\x05"), InvalidFlags),
     ("no kinds", unchecked(Subscribe(kinds=Kinds(0))), InvalidFlags),
+    ("bodies alone", unchecked(Subscribe(kinds=Kinds.BODIES)), InvalidFlags),
+    ("a kind not defined", patched(encode(DEFAULT_OPTIONS), 11, b"\x0b"), InvalidFlags),
     ("a NaN rate", unchecked(Subscribe(max_rate_hz=NAN)), InvalidNumber),
 ]
 
@@ -708,6 +1047,19 @@ def test_last_seen_may_equal_the_pose_time() -> None:
         (Subscribe(object_ids=tuple(range(1025))), CountOverCap),
         (Subscribe(max_rate_hz=-1.0), InvalidNumber),
         (Subscribe(kinds=Kinds(0)), InvalidFlags),
+        (Subscribe(kinds=Kinds.BODIES), InvalidFlags),
+        (replace(DOC_BODY, volume_m3=0.0), BadBody),
+        (replace(DOC_BODY, proxy=BodyProxy.SHAPE), BadBody),
+        (replace(DOC_BODY, margin_m=-0.25), InvalidNumber),
+        (replace(DOC_BODY, centre_of_mass=np.array([0, NAN, 0], np.float32)), NonFinite),
+        (replace(DOC_BODY, triangles=np.array([[0, 1, 4]], np.uint32)), IndexOutOfRange),
+        (replace(DOC_BODY, hulls=DOC_BODY.hulls * (MAX_HULLS + 1)), CountOverCap),
+        (replace(DOC_BODY, hulls=(Hull(TETRAHEDRON[:3], TETRAHEDRON_FACES[:1]),)), BadHull),
+        (
+            replace(DOC_BODY, hulls=(Hull(TETRAHEDRON, np.array([[0, 1, 4]], np.uint8)),)),
+            IndexOutOfRange,
+        ),
+        (replace(DOC_BODY, inertia=np.arange(9, dtype=np.float32).reshape(3, 3)), ValueError),
     ],
     ids=lambda x: x.__name__ if isinstance(x, type) else type(x).__name__,
 )
@@ -833,6 +1185,136 @@ def test_the_world_mesh_follows_the_pose() -> None:
     np.testing.assert_array_equal(mesh.triangles, shape.triangles)
     # The object frame's vertices stay as sent.
     np.testing.assert_array_equal(scene.objects[1].vertices, shape.vertices)
+
+
+def body_of(object_id: int, version: int, proxy: BodyProxy = BodyProxy.SHADOW_VOLUME) -> Body:
+    """The document's Body example, of another object and shape version."""
+    body = replace(DOC_BODY, object_id=object_id, shape_version=version, proxy=proxy)
+    if proxy is BodyProxy.SHAPE:
+        body = replace(
+            body, vertices=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.uint32)
+        )
+    return body
+
+
+def test_a_body_is_kept_beside_its_shape_and_placed_by_the_current_pose() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1, pose_time_ns=10))
+    assert scene.objects[1].body is None and scene.objects[1].world_proxy is None
+    assert scene.objects[1].world_hulls == () and scene.objects[1].world_centre_of_mass is None
+    body = body_of(1, 1)
+    scene.apply(body)
+    assert scene.objects[1].body is body and scene.stale == 0
+    # A Pose moves the body with the shape: half a turn about x, then (1, 2, 3).
+    scene.apply(
+        replace(pose_of(1, 1, 20), rotation=(1.0, 0.0, 0.0, 0.0), translation=(1.0, 2.0, 3.0))
+    )
+    held = scene.objects[1]
+    assert held.body is body and held.pose_time_ns == 20
+    expected = TETRAHEDRON * [1, -1, -1] + [1, 2, 3]
+    proxy = held.world_proxy
+    assert proxy is not None and proxy.vertices.dtype == np.float32
+    np.testing.assert_allclose(proxy.vertices, expected, atol=1e-6)
+    np.testing.assert_array_equal(proxy.triangles, TETRAHEDRON_FACES)
+    (hull,) = held.world_hulls
+    np.testing.assert_allclose(hull.vertices, expected, atol=1e-6)
+    assert hull.triangles.dtype == np.uint32
+    np.testing.assert_array_equal(hull.triangles, TETRAHEDRON_FACES)
+    centre = held.world_centre_of_mass
+    assert centre is not None
+    np.testing.assert_allclose(centre, [1.25, 1.75, 2.75], atol=1e-6)
+    # The object frame's proxy stays as sent.
+    np.testing.assert_array_equal(body.vertices, TETRAHEDRON)
+
+
+def test_a_body_whose_proxy_is_its_shape_is_the_shape_in_the_world() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1, flags=SHAPE_CLOSED))
+    scene.apply(body_of(1, 1, BodyProxy.SHAPE))
+    held = scene.objects[1]
+    proxy = held.world_proxy
+    assert proxy is not None
+    np.testing.assert_array_equal(proxy.vertices, held.mesh.vertices)
+    np.testing.assert_array_equal(proxy.triangles, held.shape.triangles)
+
+
+def test_a_body_of_an_object_not_held_is_stale() -> None:
+    scene = Scene()
+    scene.apply(body_of(1, 1))
+    assert scene.objects == {} and scene.stale == 1
+    scene.apply(shape_of(1, 1))
+    assert scene.objects[1].body is None
+
+
+def test_the_newest_body_is_kept_and_a_newer_shape_in_the_same_frame_keeps_it() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 2))
+    scene.apply(body_of(1, 2))
+    scene.apply(body_of(1, 1))  # older than the held body
+    assert scene.objects[1].body is not None and scene.objects[1].body.shape_version == 2
+    assert scene.stale == 1
+    # A new shape without `new_frame` is in the same frame: the held body still fits.
+    scene.apply(shape_of(1, 3))
+    held = scene.objects[1]
+    assert held.shape_version == 3 and held.body is not None and held.body.shape_version == 2
+    # Its own body, when it comes, replaces the older one; the same one again is taken too.
+    scene.apply(body_of(1, 3))
+    scene.apply(body_of(1, 3))
+    assert scene.objects[1].body is not None and scene.objects[1].body.shape_version == 3
+    assert scene.stale == 1
+
+
+def test_a_new_frame_shape_drops_an_older_body() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1))
+    scene.apply(body_of(1, 1))
+    scene.apply(shape_of(1, 2, flags=SHAPE_NEW_FRAME))
+    held = scene.objects[1]
+    assert held.shape_version == 2 and held.body is None and held.world_hulls == ()
+    # A Body made in the frame before, arriving late, does not fit either ...
+    scene.apply(body_of(1, 1))
+    assert scene.objects[1].body is None and scene.stale == 1
+    # ... not even after a later shape in the new frame.
+    scene.apply(shape_of(1, 3))
+    scene.apply(body_of(1, 1))
+    assert scene.objects[1].body is None and scene.stale == 2
+    scene.apply(body_of(1, 2))
+    assert scene.objects[1].body is not None and scene.objects[1].body.shape_version == 2
+
+
+def test_a_new_frame_shape_keeps_a_body_of_its_own_version() -> None:
+    """Where Shapes and Bodies travel apart, a Body can come before its Shape."""
+    scene = Scene()
+    scene.apply(shape_of(1, 1))
+    scene.apply(body_of(1, 2))
+    scene.apply(shape_of(1, 2, flags=SHAPE_NEW_FRAME))
+    held = scene.objects[1]
+    assert held.body is not None and held.body.shape_version == 2
+
+
+def test_a_remove_or_a_session_forgets_the_body_with_the_object() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1))
+    scene.apply(body_of(1, 1))
+    scene.apply(Remove(1))
+    assert scene.objects == {}
+    scene.apply(shape_of(1, 1))
+    assert scene.objects[1].body is None
+    scene.apply(body_of(1, 1))
+    scene.apply(Session(1, 2))
+    scene.apply(shape_of(1, 1))
+    assert scene.objects[1].body is None
+
+
+def test_a_filter_without_bodies_forgets_the_bodies() -> None:
+    scene = Scene()
+    for object_id in (1, 2):
+        scene.apply(shape_of(object_id, 1))
+        scene.apply(body_of(object_id, 1))
+    scene.keep_only(Subscribe(kinds=Kinds.OBJECTS | Kinds.BODIES, object_ids=(1,)))
+    assert set(scene.objects) == {1} and scene.objects[1].body is not None
+    scene.keep_only(Subscribe(kinds=Kinds.OBJECTS))
+    assert set(scene.objects) == {1} and scene.objects[1].body is None
 
 
 def test_a_pose_extrapolates_by_its_velocities() -> None:

@@ -29,13 +29,14 @@ pub struct SubscribeArgs {
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// With --out: also keep a MuJoCo scene of the objects there, DIR/scene.xml with its meshes
-    /// in DIR/meshes: each object a free body with convex collision parts (an open one-view
-    /// shell first extruded down onto its support) and mass properties at 500 kg/m³, each
-    /// support plane a plane, gravity towards the largest. Rewritten whole after every new
-    /// shape or removal and at most once a second for moves
+    /// in DIR/meshes: each object a free body with the convex collision parts and mass
+    /// properties (at 500 kg/m³) of its published collision body (until it has one, of its
+    /// shape, an open one-view shell first extruded down onto its support), each support plane
+    /// a plane, gravity towards the largest. Rewritten whole after every new shape, body or
+    /// removal and at most once a second for moves
     #[arg(long, requires = "out")]
     mjcf: bool,
-    /// Exit after this many updates (shapes and poses)
+    /// Exit after this many updates (shapes and poses; bodies are not counted)
     #[arg(long, value_name = "N")]
     count: Option<u64>,
     /// Also print the daemon's periodic stats
@@ -57,13 +58,17 @@ pub struct SubscribeArgs {
     /// Only objects, or only support planes
     #[arg(long, value_name = "KIND", value_parser = ["objects", "supports"])]
     only: Option<String>,
+    /// Do not ask for the objects' collision bodies (a Body message after each shape: closed
+    /// proxy, convex hulls, mass properties)
+    #[arg(long)]
+    no_bodies: bool,
     /// Only these object ids (repeat, or separate with commas)
     #[arg(long = "id", value_name = "ID", value_delimiter = ',')]
     ids: Vec<u64>,
     /// Read from Zenoh instead of the socket, joining as FILE's [zenoh] section says (the same
     /// section as the daemon's, with `connect` naming the daemon's or a router's endpoint);
     /// needs a build with the `zenoh` feature
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "extrapolate", "only", "ids"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "extrapolate", "only", "ids", "no_bodies"])]
     zenoh: Option<PathBuf>,
 }
 
@@ -134,10 +139,17 @@ impl SubscribeArgs {
             resend: true,
             extrapolate: self.extrapolate,
             max_rate_hz: self.max_rate_hz.unwrap_or(0.0),
-            kinds: match self.only.as_deref() {
-                Some("objects") => Kinds::OBJECTS,
-                Some("supports") => Kinds::SUPPORTS,
-                _ => Kinds::ALL,
+            kinds: {
+                let kinds = match self.only.as_deref() {
+                    Some("objects") => Kinds::OBJECTS.with(Kinds::BODIES),
+                    Some("supports") => Kinds::SUPPORTS,
+                    _ => Kinds::ALL,
+                };
+                if self.no_bodies {
+                    kinds.without(Kinds::BODIES).unwrap_or(kinds)
+                } else {
+                    kinds
+                }
             },
             object_ids: self.ids.clone(),
         };
@@ -215,6 +227,10 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                 writeln!(out, "{}", describe_pose(pose, &previous))?;
                 (pose.pose_time_ns != previous.pose_time_ns).then_some(id)
             }
+            (SceneChange::Bodied(id), Message::Body(body)) => {
+                writeln!(out, "{}", describe_body(body))?;
+                Some(id)
+            }
             (SceneChange::Removed(id), _) => {
                 writeln!(out, "remove {}", Id(id))?;
                 if let Some(dir) = &args.out {
@@ -268,14 +284,19 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
             // held: nothing to show.
             (
                 _,
-                Message::Session(_) | Message::Shape(_) | Message::Pose(_) | Message::Remove { .. },
+                Message::Session(_)
+                | Message::Shape(_)
+                | Message::Body(_)
+                | Message::Pose(_)
+                | Message::Remove { .. },
             ) => None,
             (_, other) => {
                 writeln!(out, "unexpected {} message; ignored", other.name())?;
                 None
             }
         };
-        if let (Some(dir), Some(id)) = (&args.out, changed) {
+        let changed_mesh = changed.filter(|_| !matches!(change, SceneChange::Bodied(_)));
+        if let (Some(dir), Some(id)) = (&args.out, changed_mesh) {
             if let Some(mesh) = scene.world_mesh(id) {
                 let path = dir.join(file_name(id));
                 write_mesh_whole(&path, &mesh)
@@ -288,6 +309,7 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                 SceneChange::SnapshotDone
                     | SceneChange::Added(_)
                     | SceneChange::Reshaped(_)
+                    | SceneChange::Bodied(_)
                     | SceneChange::Removed(_)
             );
             let moved = matches!(change, SceneChange::Moved(_));
@@ -410,6 +432,27 @@ fn describe_shape(shape: &Shape, age: Duration) -> String {
         mesh.vertices.len(),
         shape.report.faces_in,
         shape.report.max_residual_m * 1e3
+    )
+}
+
+/// One line for a Body: what its proxy is, its hulls and its volume.
+fn describe_body(body: &tacmesh::protocol::Body) -> String {
+    let vertices: usize = body.hulls.iter().map(|h| h.vertices.len()).sum();
+    let proxy = match body.proxy {
+        tacmesh::protocol::BodyProxy::Shape => "the shape itself".to_owned(),
+        other => format!(
+            "{} of {} faces, grown {:.1} mm",
+            other.as_str(),
+            body.mesh.triangles.len(),
+            body.margin_m * 1e3
+        ),
+    };
+    format!(
+        "body {} shape {}: proxy {proxy}, {} convex hulls ({vertices} vertices), volume {:.2} l",
+        Id(body.object_id),
+        body.shape_version,
+        body.hulls.len(),
+        body.volume_m3 * 1e3
     )
 }
 
@@ -577,9 +620,13 @@ mod tests {
         .expect("options");
         assert_eq!(options.encoding, Encoding::Compact);
         assert!(options.resend);
-        assert_eq!(options.kinds, Kinds::OBJECTS);
+        assert_eq!(options.kinds, Kinds::OBJECTS.with(Kinds::BODIES));
         assert_eq!(options.object_ids, vec![3, 5]);
         assert_eq!(options.max_rate_hz, 10.0);
+        let no_bodies = parse(&["--no-bodies"]).options().expect("options");
+        assert_eq!(no_bodies.kinds, Kinds::OBJECTS.with(Kinds::SUPPORTS));
+        let supports = parse(&["--only", "supports"]).options().expect("options");
+        assert_eq!(supports.kinds, Kinds::SUPPORTS);
     }
 
     /// A reader that has the mesh file open while it is replaced still reads the whole old

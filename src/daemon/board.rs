@@ -8,8 +8,10 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use glam::{Affine3A, Quat, Vec3};
+use tacmesh_physics::WorldSupport;
 use tacmesh_protocol::{
-    Encoding, Pose, Shape, SimplifyStats, FIRST_SUPPORT_ID, SHAPE_CLOSED, SHAPE_SUPPORT,
+    Body, Encoding, Pose, Shape, SimplifyStats, FIRST_SUPPORT_ID, SHAPE_CLOSED, SHAPE_NEW_FRAME,
+    SHAPE_SUPPORT,
 };
 use tacmesh_publish::Publisher;
 use tacmesh_source::{monotonic_now, realtime_of, TriMesh};
@@ -31,6 +33,14 @@ struct Published {
     closed: bool,
 }
 
+/// A shape the board just published, for its collision body.
+#[derive(Debug)]
+pub struct PublishedShape {
+    pub shape_version: u64,
+    pub world_from_object: Affine3A,
+    pub mesh_in_object: TriMesh,
+}
+
 #[derive(Debug)]
 struct Entry {
     world_from_object: Affine3A,
@@ -47,6 +57,9 @@ struct Entry {
     /// reframed): the next publication must be a Shape, since a Pose would place the client's
     /// shape by the new frame.
     frame_changed: bool,
+    /// The first shape version published in the object's current frame: a body made from an
+    /// earlier shape does not fit.
+    frame_since_version: u64,
     /// The last-seen time subscribers were last sent, and when (monotonic now).
     last_seen_sent: Duration,
     sent_at: Duration,
@@ -90,6 +103,7 @@ impl Board {
             shape_version: 0,
             mesh: None,
             frame_changed: false,
+            frame_since_version: 0,
             last_seen_sent: Duration::ZERO,
             sent_at: Duration::ZERO,
         });
@@ -195,7 +209,8 @@ impl Board {
     }
 
     /// A new mesh of the object (in its own frame), made from data up to `capture_time`.
-    /// Ignored if the object was removed meanwhile.
+    /// Ignored if the object was removed meanwhile. Returns what was published, for its
+    /// collision body.
     pub fn new_mesh(
         &mut self,
         id: u64,
@@ -204,17 +219,66 @@ impl Board {
         capture_time: Duration,
         publisher: &Publisher,
         counters: &Counters,
-    ) {
-        let Some(entry) = self.entries.get_mut(&id) else {
-            return;
-        };
+    ) -> Option<PublishedShape> {
+        let entry = self.entries.get_mut(&id)?;
         entry.shape_time = entry.shape_time.max(capture_time);
         entry.mesh = Some(Published {
             closed: is_closed(&mesh_in_object),
             mesh_in_object,
             stats,
         });
+        let version_before = entry.shape_version;
         Self::publish_shape(id, entry, publisher, counters, capture_time);
+        if entry.shape_version == version_before || id >= FIRST_SUPPORT_ID {
+            return None;
+        }
+        Some(PublishedShape {
+            shape_version: entry.shape_version,
+            world_from_object: entry.world_from_object,
+            mesh_in_object: entry.mesh.as_ref()?.mesh_in_object.clone(),
+        })
+    }
+
+    /// The support planes published now, in the world.
+    pub fn supports(&self) -> Vec<WorldSupport> {
+        self.entries
+            .iter()
+            .filter(|(&id, _)| id >= FIRST_SUPPORT_ID)
+            .filter_map(|(&id, entry)| {
+                let mesh = &entry.mesh.as_ref()?.mesh_in_object;
+                let in_world = TriMesh::new(
+                    mesh.vertices
+                        .iter()
+                        .map(|&v| entry.world_from_object.transform_point3(v))
+                        .collect(),
+                    mesh.triangles.clone(),
+                );
+                WorldSupport::of_fan(id, &in_world)
+            })
+            .collect()
+    }
+
+    /// A collision body made from the object's shape of `body.shape_version`: published, unless
+    /// the object was removed or reframed since (the body is in the frame before) or its shape
+    /// was never published.
+    pub fn new_body(&mut self, body: Body, publisher: &Publisher) {
+        let id = body.object_id;
+        let Some(entry) = self.entries.get(&id) else {
+            return;
+        };
+        if body.shape_version < entry.frame_since_version
+            || body.shape_version > entry.shape_version
+            || entry.frame_changed
+        {
+            tracing::debug!(
+                "object {id}: the body of shape {} no longer fits (reframed since)",
+                body.shape_version
+            );
+            return;
+        }
+        if let Err(err) = publisher.body(body) {
+            tracing::warn!("object {id}: body not published: {err}");
+        }
     }
 
     fn pose_of(id: u64, entry: &Entry) -> Pose {
@@ -269,6 +333,9 @@ impl Board {
         if mesh.closed {
             flags |= SHAPE_CLOSED;
         }
+        if entry.frame_changed {
+            flags |= SHAPE_NEW_FRAME;
+        }
         if id >= FIRST_SUPPORT_ID {
             flags |= SHAPE_SUPPORT;
         }
@@ -283,6 +350,9 @@ impl Board {
         };
         match publisher.shape(shape) {
             Ok(()) => {
+                if entry.frame_changed {
+                    entry.frame_since_version = entry.shape_version;
+                }
                 entry.frame_changed = false;
                 Self::sent(entry);
                 counters.record(Stage::Publish, started.elapsed());

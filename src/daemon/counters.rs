@@ -20,16 +20,19 @@ pub enum Stage {
     Mesh,
     Simplify,
     Publish,
+    /// A collision body (proxy, convex parts, mass), after its shape was published.
+    Body,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 7] = [
         Stage::Deproject,
         Stage::Segment,
         Stage::Integrate,
         Stage::Mesh,
         Stage::Simplify,
         Stage::Publish,
+        Stage::Body,
     ];
 
     pub fn name(self) -> &'static str {
@@ -40,6 +43,7 @@ impl Stage {
             Stage::Mesh => "mesh",
             Stage::Simplify => "simplify",
             Stage::Publish => "publish",
+            Stage::Body => "body",
         }
     }
 }
@@ -64,6 +68,9 @@ pub struct Counters {
     pub meshing_runs: AtomicU64,
     pub meshing_failures: AtomicU64,
     pub pose_updates: AtomicU64,
+    /// Collision bodies made, and shapes that got none (see `bodies`).
+    pub bodies_made: AtomicU64,
+    pub body_failures: AtomicU64,
     /// Objects created and removed by the tracker, whether confirmed or not: on a static
     /// scene both should stop once it has been seen (churn, see [`Counters::births_per_s`]).
     pub objects_born: AtomicU64,
@@ -88,6 +95,8 @@ impl Default for Counters {
             meshing_runs: AtomicU64::new(0),
             meshing_failures: AtomicU64::new(0),
             pose_updates: AtomicU64::new(0),
+            bodies_made: AtomicU64::new(0),
+            body_failures: AtomicU64::new(0),
             objects_born: AtomicU64::new(0),
             objects_removed: AtomicU64::new(0),
             recent_births: Mutex::new(std::collections::VecDeque::new()),
@@ -116,6 +125,8 @@ pub struct CounterSnapshot {
     pub meshing_runs: u64,
     pub meshing_failures: u64,
     pub pose_updates: u64,
+    pub bodies_made: u64,
+    pub body_failures: u64,
     pub objects_born: u64,
     pub objects_removed: u64,
     /// Object births per second over the last [`BIRTH_WINDOW`] (or since start, if shorter).
@@ -206,6 +217,8 @@ impl Counters {
             meshing_runs: load(&self.meshing_runs),
             meshing_failures: load(&self.meshing_failures),
             pose_updates: load(&self.pose_updates),
+            bodies_made: load(&self.bodies_made),
+            body_failures: load(&self.body_failures),
             objects_born: load(&self.objects_born),
             objects_removed: load(&self.objects_removed),
             births_per_s,
@@ -265,7 +278,7 @@ impl CounterSnapshot {
             .collect();
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
-             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, shapes published {}, poses published {}, \
+             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}), shapes published {}, bodies published {}, poses published {}, \
              bytes sent {}, subscribers {} (dropped {}, refused {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
@@ -282,7 +295,10 @@ impl CounterSnapshot {
             self.meshing_runs,
             self.meshing_failures,
             self.pose_updates,
+            self.bodies_made,
+            self.body_failures,
             self.publisher.shapes_published,
+            self.publisher.bodies_published,
             self.publisher.poses_published,
             self.publisher.bytes_sent,
             self.publisher.clients_connected,

@@ -1,91 +1,28 @@
 //! The meshing worker: turns an object's fused state into a simplified mesh, off the frame
 //! path, so that a slow meshing run never holds up frames.
 //!
-//! Jobs wait in a map keyed by object: a newer job of an object replaces its waiting one (the
-//! newer state contains the older), so the queue is bounded by the number of objects.
+//! Jobs wait in a [`LatestJobs`] queue: a newer job of an object replaces its waiting one (the
+//! newer state contains the older), so the queue is bounded by the number of objects. Each
+//! published object mesh is handed on to the bodies worker ([`super::bodies`]).
 
-use std::collections::BTreeMap;
-use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
 use tacmesh_protocol::SimplifyStats;
 use tacmesh_track::MeshJob;
 
+use super::bodies::BodyJob;
 use super::counters::{Counters, Stage};
+use super::job_queue::{LatestJobs, ObjectJob};
 use super::notify::Heartbeat;
 use super::Shared;
 use crate::pipeline::mesh_fused_grid;
 
-#[derive(Default)]
-struct Queue {
-    /// Per object: the order in which it was first queued, and its newest job.
-    jobs: BTreeMap<u64, (u64, MeshJob)>,
-    next_seq: u64,
-    closed: bool,
-}
-
 /// Mesh jobs waiting for the worker, at most one per object.
-#[derive(Default)]
-pub struct MeshQueue {
-    queue: Mutex<Queue>,
-    ready: Condvar,
-}
+pub type MeshQueue = LatestJobs<MeshJob>;
 
-impl MeshQueue {
-    /// Queues a job, replacing a waiting job of the same object.
-    pub fn submit(&self, job: MeshJob) {
-        let mut queue = crate::lock(&self.queue);
-        let seq = queue.next_seq;
-        queue.next_seq += 1;
-        // A newer job replaces the waiting one but keeps its place in line.
-        let place = queue
-            .jobs
-            .get(&job.object_id)
-            .map_or(seq, |(place, _)| *place);
-        queue.jobs.insert(job.object_id, (place, job));
-        self.ready.notify_one();
-    }
-
-    /// Drops the waiting job of a removed object.
-    pub fn cancel(&self, object_id: u64) {
-        crate::lock(&self.queue).jobs.remove(&object_id);
-    }
-
-    /// Jobs waiting now.
-    pub fn len(&self) -> usize {
-        crate::lock(&self.queue).jobs.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// No more jobs: the worker finishes the one in hand and stops; waiting jobs are dropped.
-    pub fn close(&self) {
-        crate::lock(&self.queue).closed = true;
-        self.ready.notify_all();
-    }
-
-    /// The job of the object that has waited longest, or `None` once closed.
-    fn take(&self) -> Option<MeshJob> {
-        let mut queue = crate::lock(&self.queue);
-        loop {
-            if queue.closed {
-                return None;
-            }
-            let oldest = queue
-                .jobs
-                .iter()
-                .min_by_key(|(_, (place, _))| *place)
-                .map(|(&id, _)| id);
-            if let Some((_, job)) = oldest.and_then(|id| queue.jobs.remove(&id)) {
-                return Some(job);
-            }
-            queue = self
-                .ready
-                .wait(queue)
-                .unwrap_or_else(std::sync::PoisonError::into_inner);
-        }
+impl ObjectJob for MeshJob {
+    fn object_id(&self) -> u64 {
+        self.object_id
     }
 }
 
@@ -167,7 +104,8 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         faces_out: report.faces.min(u32::MAX as usize) as u32,
         max_residual_m: report.max_residual.max(0.0),
     };
-    crate::lock(&shared.board).new_mesh(
+    let mut board = crate::lock(&shared.board);
+    let published = board.new_mesh(
         job.object_id,
         mesh,
         stats,
@@ -175,6 +113,29 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         &shared.publisher,
         counters,
     );
+    // Its collision body is made off this thread: V-HACD takes a few hundred milliseconds on
+    // a concave object, and the next mesh should not wait for it.
+    if let Some(published) = published {
+        let support = tacmesh_physics::support_under(
+            &board.supports(),
+            &published
+                .mesh_in_object
+                .vertices
+                .iter()
+                .map(|&v| published.world_from_object.transform_point3(v))
+                .collect::<Vec<_>>(),
+        )
+        .map(|s| s.in_frame(published.world_from_object));
+        drop(board);
+        shared.body_queue.submit(BodyJob {
+            object_id: job.object_id,
+            shape_version: published.shape_version,
+            mesh_in_object: published.mesh_in_object,
+            viewpoint_in_object: Some(job.viewpoint_in_object),
+            support,
+            margin_m: stats.max_residual_m,
+        });
+    }
 }
 
 #[cfg(test)]

@@ -19,8 +19,10 @@
 
 pub mod access;
 mod board;
+mod bodies;
 pub mod config;
 mod counters;
+mod job_queue;
 mod mesher;
 pub mod notify;
 mod perception;
@@ -42,6 +44,7 @@ pub use sensor::{SensorError, SensorSpec};
 
 use crate::frame_ring::FrameRing;
 use board::Board;
+use bodies::BodyQueue;
 use counters::Counters;
 use mesher::MeshQueue;
 use notify::{Heartbeat, Heartbeats, Notifier, SystemdFeed};
@@ -120,6 +123,8 @@ pub(crate) struct Shared {
     counters: Counters,
     board: Mutex<Board>,
     mesh_queue: MeshQueue,
+    /// Published shapes waiting for their collision bodies ([`bodies`]).
+    body_queue: BodyQueue,
     publisher: Publisher,
     source_stop: AtomicBool,
     /// Sources whose stream ended (a recording played once). When every configured sensor's
@@ -142,6 +147,7 @@ pub struct Daemon {
     sources: Vec<JoinHandle<()>>,
     perception: Option<JoinHandle<()>>,
     meshers: Vec<JoinHandle<()>>,
+    bodies: Option<JoinHandle<()>>,
     started: Instant,
     /// The source and mesher threads' heartbeats, for the watchdog.
     heartbeats: Heartbeats,
@@ -200,6 +206,7 @@ impl Daemon {
             counters: Counters::default(),
             board: Mutex::new(Board::default()),
             mesh_queue: MeshQueue::default(),
+            body_queue: BodyQueue::default(),
             publisher,
             source_stop: AtomicBool::new(false),
             streams_ended: AtomicUsize::new(0),
@@ -210,6 +217,7 @@ impl Daemon {
             sources: Vec::new(),
             perception: None,
             meshers: Vec::new(),
+            bodies: None,
             started: Instant::now(),
             heartbeats: Heartbeats::default(),
             systemd: SystemdFeed::new(Notifier::from_env(), Instant::now()),
@@ -232,6 +240,14 @@ impl Daemon {
                 Box::new(move || mesher::run_mesher(&s, &heartbeat)),
             )?);
         }
+        let s = Arc::clone(&shared);
+        let heartbeat = daemon
+            .heartbeats
+            .register_worker("bodies", notify::MESH_RUN_LIMIT);
+        daemon.bodies = Some(spawn(
+            "bodies",
+            Box::new(move || bodies::run_bodies(&s, &heartbeat)),
+        )?);
         let s = Arc::clone(&shared);
         daemon.perception = Some(spawn(
             "perception",
@@ -342,6 +358,10 @@ impl Daemon {
         self.shared.mesh_queue.close();
         for mesher in self.meshers.drain(..) {
             join(mesher, "mesher");
+        }
+        self.shared.body_queue.close();
+        if let Some(bodies) = self.bodies.take() {
+            join(bodies, "bodies");
         }
         // A source blocked in a device read may not return soon; it holds only its own
         // handle and a reference to the shared state, so it is left to end with the process.
@@ -575,6 +595,7 @@ mod tests {
             counters: Counters::default(),
             board: Mutex::new(Board::default()),
             mesh_queue: MeshQueue::default(),
+            body_queue: BodyQueue::default(),
             publisher: Publisher::bind(PublisherConfig::new(dir.join("t.sock"))).unwrap(),
             source_stop: AtomicBool::new(false),
             streams_ended: AtomicUsize::new(0),

@@ -389,6 +389,7 @@ impl Fusing {
             }
             for &id in &report.removed {
                 shared.mesh_queue.cancel(id);
+                shared.body_queue.cancel(id);
                 board.remove(id, &shared.publisher);
             }
             for &id in report.cluster_ids.iter().flatten() {

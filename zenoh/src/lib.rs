@@ -8,11 +8,12 @@
 //!   loses the latest);
 //! - `objects/<id>/pose`: each Pose, dropped under congestion, so a slow link gets the newest
 //!   pose, never a backlog;
+//! - `objects/<id>/body`: each Body (the collision body; reliable, like shapes);
 //! - `objects/<id>/removed`: the Remove frame when the object is gone;
 //! - `stats`: the Stats frames, dropped under congestion.
 //!
-//! A query on `tacmesh/<robot>/objects/**` is answered with the current Shape of every object
-//! and its newer Pose, if any: a late joiner gets every object at once.
+//! A query on `tacmesh/<robot>/objects/**` is answered with the current Shape of every object,
+//! its Body and its newer Pose, if any: a late joiner gets every object at once.
 //!
 //! Entry points: [`ZenohSettings`] (what the `[zenoh]` section of a config says),
 //! [`ZenohMirror`] (the daemon's side, a [`tacmesh_publish::Mirror`]) and [`ZenohSubscription`]
@@ -26,7 +27,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{Encoding, FrameDecoder, Message, Sender, WireError};
-use tacmesh_publish::{EncodedPose, EncodedShape, Mirror};
+use tacmesh_publish::{EncodedBody, EncodedPose, EncodedShape, Mirror};
 use zenoh::qos::CongestionControl;
 use zenoh::query::ConsolidationMode;
 use zenoh::Wait;
@@ -185,6 +186,10 @@ impl Keys {
         format!("{}/objects/{object_id}/pose", self.prefix)
     }
 
+    pub fn body(&self, object_id: u64) -> String {
+        format!("{}/objects/{object_id}/body", self.prefix)
+    }
+
     pub fn removed(&self, object_id: u64) -> String {
         format!("{}/objects/{object_id}/removed", self.prefix)
     }
@@ -210,10 +215,11 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// What is waiting to be put: the latest shape and pose of each object, removes, stats.
+/// What is waiting to be put: the latest shape, body and pose of each object, removes, stats.
 #[derive(Default)]
 struct Pending {
     shapes: BTreeMap<u64, Arc<EncodedShape>>,
+    bodies: BTreeMap<u64, Arc<EncodedBody>>,
     poses: BTreeMap<u64, Arc<EncodedPose>>,
     removes: BTreeSet<u64>,
     stats: Option<Arc<Vec<u8>>>,
@@ -223,17 +229,24 @@ struct Pending {
 impl Pending {
     fn is_empty(&self) -> bool {
         self.shapes.is_empty()
+            && self.bodies.is_empty()
             && self.poses.is_empty()
             && self.removes.is_empty()
             && self.stats.is_none()
     }
 }
 
-/// An object's current shape and the pose newer than the one inside it, if any.
-type ShapeAndPose = (Arc<EncodedShape>, Option<Arc<EncodedPose>>);
+/// An object's current shape, its body if it has one, and the pose newer than the one inside
+/// the shape, if any.
+#[derive(Clone)]
+struct CurrentObject {
+    shape: Arc<EncodedShape>,
+    body: Option<Arc<EncodedBody>>,
+    pose: Option<Arc<EncodedPose>>,
+}
 
-/// The current shape and newer pose of every object, for the scene's queryable.
-type Current = BTreeMap<u64, ShapeAndPose>;
+/// The current shape, body and newer pose of every object, for the scene's queryable.
+type Current = BTreeMap<u64, CurrentObject>;
 
 struct Shared {
     keys: Keys,
@@ -322,10 +335,27 @@ impl ZenohMirror {
 
 impl Mirror for ZenohMirror {
     fn shape(&self, object_id: u64, shape: &Arc<EncodedShape>) {
-        lock(&self.shared.current).insert(object_id, (Arc::clone(shape), None));
+        let mut current = lock(&self.shared.current);
+        // The body stays with the object's newer shapes, unless this one is in a new frame.
+        let body = current
+            .remove(&object_id)
+            .and_then(|held| held.body)
+            .filter(|_| !shape.new_frame);
+        current.insert(
+            object_id,
+            CurrentObject {
+                shape: Arc::clone(shape),
+                body,
+                pose: None,
+            },
+        );
+        drop(current);
         let mut pending = lock(&self.shared.pending);
         pending.removes.remove(&object_id);
         pending.poses.remove(&object_id);
+        if shape.new_frame {
+            pending.bodies.remove(&object_id);
+        }
         pending.shapes.insert(object_id, Arc::clone(shape));
         drop(pending);
         self.shared.wake.notify_one();
@@ -333,7 +363,7 @@ impl Mirror for ZenohMirror {
 
     fn pose(&self, object_id: u64, pose: &Arc<EncodedPose>) {
         if let Some(entry) = lock(&self.shared.current).get_mut(&object_id) {
-            entry.1 = Some(Arc::clone(pose));
+            entry.pose = Some(Arc::clone(pose));
         }
         lock(&self.shared.pending)
             .poses
@@ -341,10 +371,21 @@ impl Mirror for ZenohMirror {
         self.shared.wake.notify_one();
     }
 
+    fn body(&self, object_id: u64, body: &Arc<EncodedBody>) {
+        if let Some(entry) = lock(&self.shared.current).get_mut(&object_id) {
+            entry.body = Some(Arc::clone(body));
+        }
+        lock(&self.shared.pending)
+            .bodies
+            .insert(object_id, Arc::clone(body));
+        self.shared.wake.notify_one();
+    }
+
     fn remove(&self, object_id: u64) {
         lock(&self.shared.current).remove(&object_id);
         let mut pending = lock(&self.shared.pending);
         pending.shapes.remove(&object_id);
+        pending.bodies.remove(&object_id);
         pending.poses.remove(&object_id);
         pending.removes.insert(object_id);
         drop(pending);
@@ -408,6 +449,9 @@ impl Shared {
         for (&id, shape) in &batch.shapes {
             self.put(session, keys.shape(id), shape.bytes(self.encoding), true);
         }
+        for (&id, body) in &batch.bodies {
+            self.put(session, keys.body(id), body.bytes(self.encoding), true);
+        }
         for (&id, pose) in &batch.poses {
             self.put(session, keys.pose(id), &pose.bytes, false);
         }
@@ -423,7 +467,7 @@ impl Shared {
         }
     }
 
-    /// One put: `reliable` ones wait for a congested link (shapes, removes: the latest must
+    /// One put: `reliable` ones wait for a congested link (shapes, bodies, removes: the latest must
     /// arrive), the others are dropped under congestion (poses, stats: a newer one follows).
     fn put(&self, session: &zenoh::Session, key: String, frame: &[u8], reliable: bool) {
         let congestion = if reliable {
@@ -451,15 +495,18 @@ impl Shared {
         }
     }
 
-    /// Answers a query for the scene: every object's shape, then its newer pose.
+    /// Answers a query for the scene: every object's shape, its body, then its newer pose.
     fn answer(&self, query: &zenoh::query::Query) {
         // Copied out (a few Arcs), so that the mirror's callbacks are not held up by replies.
-        let current: Vec<(u64, ShapeAndPose)> = lock(&self.current)
+        let current: Vec<(u64, CurrentObject)> = lock(&self.current)
             .iter()
             .map(|(&id, entry)| (id, entry.clone()))
             .collect();
-        for (id, (shape, pose)) in current {
+        for (id, CurrentObject { shape, body, pose }) in current {
             let mut replies = vec![(self.keys.shape(id), shape.bytes(self.encoding).to_vec())];
+            if let Some(body) = body {
+                replies.push((self.keys.body(id), body.bytes(self.encoding).to_vec()));
+            }
             if let Some(pose) = pose {
                 replies.push((self.keys.pose(id), pose.bytes.clone()));
             }
@@ -503,6 +550,7 @@ impl ZenohSubscription {
                 key: keys.objects(),
                 cause: cause.to_string(),
             })?;
+        // Replies come in any order: shapes first, so that a body or pose finds its object.
         let (mut shapes, mut poses) = (Vec::new(), Vec::new());
         while let Ok(reply) = replies.recv() {
             let Ok(sample) = reply.result() else {
@@ -590,6 +638,7 @@ mod tests {
         let keys = Keys::new("arm-2").expect("a plain name");
         assert_eq!(keys.shape(7), "tacmesh/arm-2/objects/7/shape");
         assert_eq!(keys.pose(7), "tacmesh/arm-2/objects/7/pose");
+        assert_eq!(keys.body(7), "tacmesh/arm-2/objects/7/body");
         assert_eq!(keys.removed(7), "tacmesh/arm-2/objects/7/removed");
         assert_eq!(keys.stats(), "tacmesh/arm-2/stats");
         assert_eq!(keys.objects(), "tacmesh/arm-2/objects/**");

@@ -415,6 +415,8 @@ fn a_scene_keeps_the_newest_body_until_the_frame_changes() {
         SceneChange::Reshaped(7)
     );
     assert!(scene.get(7).is_some_and(|o| o.body.is_none()));
+    // A body made in the frame before, arriving late, does not fit.
+    assert_eq!(scene.apply(&body(4)), SceneChange::Stale(7));
     assert_eq!(scene.apply(&body(6)), SceneChange::Bodied(7));
     assert_eq!(
         scene.apply(&shape(6, SHAPE_NEW_FRAME)),
