@@ -9,7 +9,8 @@
 //! 30 fps, paced) for 60 s, subscribes over its socket, and reports: sustained frame rate,
 //! frames dropped, frame-to-publish latency p50/p99, per-stage p50/p99 (from the daemon's last
 //! Stats message), peak RSS (VmHWM from /proc), bytes per second on the socket, and what one
-//! subscriber saw (shapes, poses, removes and their bytes, data age at arrival). With
+//! subscriber saw (shapes, poses, removes and their bytes, data age at arrival; collision
+//! bodies, their bytes and how long after its shape each came). With
 //! `BENCH_ENCODING=compact` in the environment the subscriber asks for compact shapes, with
 //! `BENCH_MAX_RATE_HZ=N` for at most N updates a second per object, with `BENCH_EXTRAPOLATE=1`
 //! for only the poses a client extrapolating by velocity needs.
@@ -96,6 +97,17 @@ fn main() {
             .saturating_sub(u128::from(capture_ns)) as f64
             / 1e6
     };
+    // Collision bodies (protocol 3): their count and bytes, and when each object's shapes
+    // arrived, for how long after its shape a body comes.
+    let (mut bodies, mut body_bytes) = (0u64, 0u64);
+    let mut shape_arrivals: std::collections::HashMap<(u64, u64), Instant> =
+        std::collections::HashMap::new();
+    let mut body_lags_ms: Vec<f64> = Vec::new();
+    // Per object: when its first shape came, and from then to its first body.
+    let mut first_shape_at: std::collections::HashMap<u64, Instant> =
+        std::collections::HashMap::new();
+    let mut first_body_lags_ms: std::collections::HashMap<u64, f64> =
+        std::collections::HashMap::new();
     let mut frame = Vec::new();
     loop {
         let message = subscription.next_message();
@@ -106,15 +118,23 @@ fn main() {
                 // Encoding adds the quantisation bound again; the size is the same.
                 shape.encoding = encoding;
             }
+            if let Message::Body(body) = &mut again {
+                body.encoding = encoding;
+            }
             encode(&again, &mut frame).expect("a decoded message encodes");
             match message {
                 Message::Shape(_) => shape_bytes += frame.len() as u64,
                 Message::Pose(_) => pose_bytes += frame.len() as u64,
+                Message::Body(_) => body_bytes += frame.len() as u64,
                 _ => other_bytes += frame.len() as u64,
             }
         }
         match message {
             Ok(Message::Shape(shape)) => {
+                shape_arrivals.insert((shape.object_id(), shape.version()), Instant::now());
+                first_shape_at
+                    .entry(shape.object_id())
+                    .or_insert_with(Instant::now);
                 shapes += 1;
                 faces += shape.mesh.triangles.len() as u64;
                 let age = age_ms(shape.shape_time_ns);
@@ -126,6 +146,19 @@ fn main() {
                 let age = age_ms(pose.last_seen_ns);
                 ages_ms.push(age);
                 moved_ages_ms.push(age);
+            }
+            Ok(Message::Body(body)) => {
+                bodies += 1;
+                // How long after its shape the body came (its shape arrived on this
+                // connection, unless it was made from an older version held over).
+                if let Some(at) = shape_arrivals.get(&(body.object_id, body.shape_version)) {
+                    body_lags_ms.push(at.elapsed().as_secs_f64() * 1e3);
+                }
+                if let Some(at) = first_shape_at.get(&body.object_id) {
+                    first_body_lags_ms
+                        .entry(body.object_id)
+                        .or_insert_with(|| at.elapsed().as_secs_f64() * 1e3);
+                }
             }
             Ok(Message::Remove { .. }) => removes += 1,
             Ok(Message::Stats(stats)) => {
@@ -152,7 +185,12 @@ fn main() {
     let processed_fps =
         ((s1.frames_in - s1.frames_dropped) - (s0.frames_in - s0.frames_dropped)) as f64 / span_s;
     let bytes_per_s = (s1.bytes_sent - s0.bytes_sent) as f64 / span_s;
-    for ages in [&mut ages_ms, &mut moved_ages_ms, &mut mesh_ages_ms] {
+    for ages in [
+        &mut ages_ms,
+        &mut moved_ages_ms,
+        &mut mesh_ages_ms,
+        &mut body_lags_ms,
+    ] {
         ages.sort_by(f64::total_cmp);
     }
     let pct_of = |ages: &[f64], q: f64| {
@@ -198,6 +236,30 @@ fn main() {
         "| subscriber: bytes of shapes / poses / the rest | {shape_bytes} / {pose_bytes} / \
          {other_bytes} ({:.0} B/s in all) |",
         (shape_bytes + pose_bytes + other_bytes) as f64 / run_s
+    );
+    println!(
+        "| subscriber: bodies, bytes | {bodies}, {body_bytes} ({:.0} B/s; {:.0} B a body) |",
+        body_bytes as f64 / run_s,
+        body_bytes as f64 / bodies.max(1) as f64
+    );
+    println!(
+        "| subscriber: a body after its shape p50 / p99 ({} matched) | {:.1} / {:.1} ms |",
+        body_lags_ms.len(),
+        pct_of(&body_lags_ms, 0.5),
+        pct_of(&body_lags_ms, 0.99)
+    );
+    let mut first_body_lags_ms: Vec<f64> = first_body_lags_ms.into_values().collect();
+    first_body_lags_ms.sort_by(f64::total_cmp);
+    println!(
+        "| subscriber: an object's first body after its first shape p50 / max ({} of {} \
+         objects got one) | {:.1} / {:.1} ms |",
+        first_body_lags_ms.len(),
+        first_shape_at
+            .keys()
+            .filter(|&&id| id < tacmesh::protocol::FIRST_SUPPORT_ID)
+            .count(),
+        pct_of(&first_body_lags_ms, 0.5),
+        first_body_lags_ms.last().copied().unwrap_or(0.0)
     );
     println!(
         "| subscriber: bytes per shape face / per pose | {:.1} / {:.0} |",

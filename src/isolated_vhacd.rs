@@ -26,6 +26,20 @@ pub const SUBCOMMAND: &str = "__vhacd";
 /// concave shapes of BENCHMARKS.md on this machine).
 pub const CHILD_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// How much the child lowers its own scheduling priority (`nice`): a body can wait, the next
+/// frame should not (on a saturated machine the frame path keeps its share of the cores).
+pub const CHILD_NICENESS: i32 = 10;
+
+/// The child's side, as the `__vhacd` subcommand runs it: lowers its own priority by
+/// [`CHILD_NICENESS`], then [`serve`]s standard input to standard output.
+pub fn serve_as_child(config: &ConvexConfig) -> Result<(), String> {
+    if let Err(err) = rustix::process::nice(CHILD_NICENESS) {
+        // Not fatal: the parts are the same at any priority.
+        tracing::debug!("cannot lower the V-HACD child's priority: {err}");
+    }
+    serve(&mut std::io::stdin(), &mut std::io::stdout(), config)
+}
+
 /// The child's side: reads the proxy from `input`, writes each part's points to `output`.
 pub fn serve(
     input: &mut impl Read,

@@ -178,8 +178,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 max_hulls: args.max_hulls,
                 ..tacmesh::physics::ConvexConfig::default()
             };
-            tacmesh::isolated_vhacd::serve(&mut std::io::stdin(), &mut std::io::stdout(), &config)
-                .map_err(anyhow::Error::msg)
+            tacmesh::isolated_vhacd::serve_as_child(&config).map_err(anyhow::Error::msg)
         }
     }
 }

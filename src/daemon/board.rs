@@ -60,6 +60,8 @@ struct Entry {
     /// The first shape version published in the object's current frame: a body made from an
     /// earlier shape does not fit.
     frame_since_version: u64,
+    /// The shape version of the last body published, if any.
+    body_version: Option<u64>,
     /// The last-seen time subscribers were last sent, and when (monotonic now).
     last_seen_sent: Duration,
     sent_at: Duration,
@@ -104,6 +106,7 @@ impl Board {
             mesh: None,
             frame_changed: false,
             frame_since_version: 0,
+            body_version: None,
             last_seen_sent: Duration::ZERO,
             sent_at: Duration::ZERO,
         });
@@ -276,9 +279,26 @@ impl Board {
             );
             return;
         }
-        if let Err(err) = publisher.body(body) {
-            tracing::warn!("object {id}: body not published: {err}");
+        let version = body.shape_version;
+        match publisher.body(body) {
+            Ok(()) => {
+                if let Some(entry) = self.entries.get_mut(&id) {
+                    entry.body_version = Some(version);
+                }
+            }
+            Err(err) => tracing::warn!("object {id}: body not published: {err}"),
         }
+    }
+
+    /// The objects whose published body fits their current frame.
+    pub fn objects_with_a_body(&self) -> std::collections::HashSet<u64> {
+        self.entries
+            .iter()
+            .filter(|(_, e)| {
+                !e.frame_changed && e.body_version.is_some_and(|v| v >= e.frame_since_version)
+            })
+            .map(|(&id, _)| id)
+            .collect()
     }
 
     fn pose_of(id: u64, entry: &Entry) -> Pose {

@@ -59,7 +59,14 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
     let exe = std::env::current_exe().ok();
     loop {
         heartbeat.idle();
-        let Some(job) = shared.body_queue.take() else {
+        // Objects with no body that fits their frame come first: a V-HACD run takes a few
+        // hundred milliseconds on a real scene's concave proxies, and an object's first body
+        // matters more than a newer version of another's (which keeps its body meanwhile).
+        let bodied = crate::lock(&shared.board).objects_with_a_body();
+        let Some(job) = shared
+            .body_queue
+            .take_first_by(|job| bodied.contains(&job.object_id))
+        else {
             break;
         };
         heartbeat.beat();

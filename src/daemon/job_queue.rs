@@ -71,6 +71,12 @@ impl<J: ObjectJob> LatestJobs<J> {
 
     /// The job of the object that has waited longest, or `None` once closed.
     pub fn take(&self) -> Option<J> {
+        self.take_first_by(|_| ())
+    }
+
+    /// The job that comes first by `urgency` (lower first), then by how long its object has
+    /// waited; `None` once closed. Waits while the queue is empty.
+    pub fn take_first_by<K: Ord>(&self, urgency: impl Fn(&J) -> K) -> Option<J> {
         let mut queue = crate::lock(&self.queue);
         loop {
             if queue.closed {
@@ -79,7 +85,7 @@ impl<J: ObjectJob> LatestJobs<J> {
             let oldest = queue
                 .jobs
                 .iter()
-                .min_by_key(|(_, (place, _))| *place)
+                .min_by_key(|(_, (place, job))| (urgency(job), *place))
                 .map(|(&id, _)| id);
             if let Some((_, job)) = oldest.and_then(|id| queue.jobs.remove(&id)) {
                 return Some(job);
