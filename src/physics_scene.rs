@@ -1,6 +1,9 @@
 //! A physics scene of what a subscriber holds (`tacmesh subscribe --out DIR --mjcf`): each
 //! object a moving body with convex collision parts and mass properties, each support plane a
-//! plane, gravity towards the largest support.
+//! plane, gravity towards the largest support. An object whose body does not stand on a
+//! support by itself (it touches it in fewer than three points, or its centre of mass is not
+//! above them: a fragment held up by another object) is held still instead, a static body
+//! that still collides.
 //!
 //! Each object's collision parts are its published Body's (docs/protocol.md: the daemon's
 //! proxy, swept along the sensor's rays, its convex hulls and mass properties) when it has
@@ -17,7 +20,7 @@ use std::collections::HashMap;
 use glam::{Affine3A, Vec3};
 use tacmesh_physics::mjcf::{Motion, Scene as MjcfScene, SceneBody, ScenePlane, WorldFromBody};
 use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
-use tacmesh_physics::{convex_parts, ConvexConfig, MassProperties, WorldSupport};
+use tacmesh_physics::{convex_parts, rests_on, ConvexConfig, MassProperties, WorldSupport};
 use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
 
@@ -50,6 +53,10 @@ pub struct PhysicsUpdate {
     pub from_bodies: usize,
     /// Objects left out, with why (a shape too flat or small to hold a volume).
     pub left_out: Vec<(u64, String)>,
+    /// Objects held still (static) because their body does not stand on a support by itself,
+    /// with why: a fragment of an object held up by another, or a proxy that leans off its
+    /// foot would topple or fall in the simulation.
+    pub held_still: Vec<(u64, String)>,
 }
 
 fn world_support(object: &SceneObject) -> Option<WorldSupport> {
@@ -81,6 +88,7 @@ impl PhysicsScene {
         let mut decomposed = 0;
         let mut from_bodies = 0;
         let mut left_out = Vec::new();
+        let mut held_still = Vec::new();
         let mut bodies = Vec::new();
         let mut objects: Vec<&SceneObject> =
             scene.objects().filter(|o| !o.shape.is_support()).collect();
@@ -114,17 +122,37 @@ impl PhysicsScene {
                 from_bodies += 1;
             }
             match &self.collisions[&id].parts {
-                Ok((parts, mass, _)) => bodies.push(SceneBody {
-                    name: format!("object-{id}"),
-                    world_from_body: WorldFromBody {
-                        rotation: object.pose.rotation,
-                        translation_m: object.pose.translation,
-                    },
-                    visual: object.shape.mesh.clone(),
-                    convex_parts: parts.clone(),
-                    mass: *mass,
-                    motion: Motion::Dynamic,
-                }),
+                Ok((parts, mass, _)) => {
+                    let support = support_under(&supports, object, world_from_object);
+                    let motion = match support {
+                        Some(support) if rests_on(parts, mass.centre_of_mass, support) => {
+                            Motion::Dynamic
+                        }
+                        Some(_) => {
+                            held_still.push((
+                                id,
+                                "its centre of mass is not above where it touches its support"
+                                    .to_owned(),
+                            ));
+                            Motion::Static
+                        }
+                        None => {
+                            held_still.push((id, "it stands on no support".to_owned()));
+                            Motion::Static
+                        }
+                    };
+                    bodies.push(SceneBody {
+                        name: format!("object-{id}"),
+                        world_from_body: WorldFromBody {
+                            rotation: object.pose.rotation,
+                            translation_m: object.pose.translation,
+                        },
+                        visual: object.shape.mesh.clone(),
+                        convex_parts: parts.clone(),
+                        mass: *mass,
+                        motion,
+                    })
+                }
                 Err(why) => left_out.push((id, why.clone())),
             }
         }
@@ -148,6 +176,7 @@ impl PhysicsScene {
             decomposed,
             from_bodies,
             left_out,
+            held_still,
         }
     }
 }

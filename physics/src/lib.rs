@@ -22,5 +22,5 @@ pub use mjcf::{
     WorldFromBody, WrittenScene,
 };
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
-pub use support::{support_under, WorldSupport};
+pub use support::{rests_on, support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;

@@ -81,6 +81,66 @@ pub fn support_under<'a>(
         .map(|(_, s)| s)
 }
 
+/// How close to the support a part's vertex must be to count as touching it, metres.
+pub const TOUCHING_M: f32 = 0.005;
+
+/// Whether a body made of `parts` (convex hulls, in the frame `support` is given in) stands on
+/// the support by itself: it touches it in at least three points, and its centre of mass is
+/// above the polygon they span. A body that does not (a fragment of an object held up by
+/// another, a proxy that leans off its foot) would topple or fall in a simulation: the caller
+/// holds it still instead.
+pub fn rests_on(parts: &[TriMesh], centre_of_mass: Vec3, support: SupportPlane) -> bool {
+    let normal = support.normal.normalize_or_zero();
+    if normal == Vec3::ZERO {
+        return false;
+    }
+    // Two directions in the plane, for 2-D coordinates of the contact points.
+    let u = normal.any_orthonormal_vector();
+    let v = normal.cross(u);
+    let flat = |p: Vec3| glam::Vec2::new(p.dot(u), p.dot(v));
+    let touching: Vec<glam::Vec2> = parts
+        .iter()
+        .flat_map(|part| part.vertices.iter())
+        .filter(|&&p| support.height(p) <= TOUCHING_M)
+        .map(|&p| flat(p))
+        .collect();
+    let footprint = convex_polygon(touching);
+    footprint.len() >= 3 && inside_convex(&footprint, flat(centre_of_mass))
+}
+
+/// The convex hull of points in the plane, counter-clockwise (Andrew's monotone chain). By
+/// hand: a footprint has a few dozen points, and none of our dependencies has a 2-D hull.
+fn convex_polygon(mut points: Vec<glam::Vec2>) -> Vec<glam::Vec2> {
+    points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    points.dedup();
+    if points.len() < 3 {
+        return points;
+    }
+    let turns_left = |o: glam::Vec2, a: glam::Vec2, b: glam::Vec2| (a - o).perp_dot(b - o) > 0.0;
+    let mut hull: Vec<glam::Vec2> = Vec::with_capacity(points.len() * 2);
+    for pass in [points.clone(), points.into_iter().rev().collect()] {
+        let start = hull.len();
+        for p in pass {
+            while hull.len() >= start + 2
+                && !turns_left(hull[hull.len() - 2], hull[hull.len() - 1], p)
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop(); // the last point of each pass starts the other
+    }
+    hull
+}
+
+/// Whether `p` lies inside (or on) a counter-clockwise convex polygon.
+fn inside_convex(polygon: &[glam::Vec2], p: glam::Vec2) -> bool {
+    (0..polygon.len()).all(|i| {
+        let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+        (b - a).perp_dot(p - a) >= 0.0
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,5 +184,59 @@ mod tests {
         let p_object = world_from_object.inverse().transform_point3(p_world);
         assert!(plane.height(p_object).abs() < 1e-5);
         assert!(plane.normal.distance(-Vec3::Z) < 1e-5);
+    }
+
+    fn boxed(lo: Vec3, hi: Vec3) -> TriMesh {
+        let corners = (0..8)
+            .map(|i| {
+                Vec3::new(
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                )
+            })
+            .collect();
+        TriMesh::new(corners, vec![])
+    }
+
+    #[test]
+    fn a_body_rests_when_its_centre_of_mass_is_above_its_footprint() {
+        let table = SupportPlane {
+            normal: Vec3::Z,
+            offset: 0.0,
+        };
+        let block = [boxed(Vec3::ZERO, Vec3::new(0.1, 0.1, 0.3))];
+        assert!(rests_on(&block, Vec3::new(0.05, 0.05, 0.15), table));
+        // Its centre of mass past its foot's edge: it would topple.
+        assert!(!rests_on(&block, Vec3::new(0.15, 0.05, 0.15), table));
+        // Floating 2 cm above the table: nothing touches.
+        let floating = [boxed(Vec3::new(0.0, 0.0, 0.02), Vec3::new(0.1, 0.1, 0.3))];
+        assert!(!rests_on(&floating, Vec3::new(0.05, 0.05, 0.15), table));
+        // Two parts: an overhang whose centre of mass is above the first part's foot.
+        let l_shape = [
+            boxed(Vec3::ZERO, Vec3::new(0.1, 0.1, 0.1)),
+            boxed(Vec3::new(0.0, 0.0, 0.1), Vec3::new(0.3, 0.1, 0.15)),
+        ];
+        assert!(rests_on(&l_shape, Vec3::new(0.08, 0.05, 0.1), table));
+        assert!(!rests_on(&l_shape, Vec3::new(0.2, 0.05, 0.12), table));
+    }
+
+    #[test]
+    fn the_footprint_is_the_convex_hull_of_the_contacts() {
+        let square = convex_polygon(vec![
+            glam::Vec2::new(0.0, 0.0),
+            glam::Vec2::new(1.0, 0.0),
+            glam::Vec2::new(0.5, 0.5),
+            glam::Vec2::new(1.0, 1.0),
+            glam::Vec2::new(0.0, 1.0),
+            glam::Vec2::new(0.0, 1.0),
+        ]);
+        assert_eq!(square.len(), 4, "{square:?}");
+        assert!(inside_convex(&square, glam::Vec2::new(0.5, 0.5)));
+        assert!(
+            inside_convex(&square, glam::Vec2::new(1.0, 0.5)),
+            "on an edge"
+        );
+        assert!(!inside_convex(&square, glam::Vec2::new(1.1, 0.5)));
     }
 }

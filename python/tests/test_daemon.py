@@ -57,10 +57,22 @@ def daemon_binary() -> Path:
 
 
 class Daemon:
-    def __init__(self, socket_path: Path) -> None:
+    """``tacmesh run`` on ``sensor`` (the demo scene by default), with ``extra`` arguments."""
+
+    def __init__(
+        self, socket_path: Path, sensor: str = "sim:demo", extra: tuple[str, ...] = ()
+    ) -> None:
         self.socket_path = socket_path
         self.process = subprocess.Popen(
-            [str(daemon_binary()), "run", "--sensor", "sim:demo", "--socket", str(socket_path)],
+            [
+                str(daemon_binary()),
+                "run",
+                "--sensor",
+                sensor,
+                "--socket",
+                str(socket_path),
+                *extra,
+            ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )

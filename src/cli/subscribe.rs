@@ -32,8 +32,10 @@ pub struct SubscribeArgs {
     /// in DIR/meshes: each object a free body with the convex collision parts and mass
     /// properties (at 500 kg/m³) of its published collision body (until it has one, of its
     /// shape, an open one-view shell first extruded down onto its support), each support plane
-    /// a plane, gravity towards the largest. Rewritten whole after every new shape, body or
-    /// removal and at most once a second for moves
+    /// a plane, gravity towards the largest. The objects' bodies do not collide with each other
+    /// (each is a conservative proxy, which may reach into another's unseen space); one that
+    /// does not stand on a support by itself is static. Rewritten whole after every new shape,
+    /// body or removal and at most once a second for moves
     #[arg(long, requires = "out")]
     mjcf: bool,
     /// Exit after this many updates (shapes and poses; bodies are not counted)
@@ -200,6 +202,7 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
         physics: PhysicsScene::new(),
         written_at: None,
         warned: Default::default(),
+        held_still: Default::default(),
     });
     loop {
         if args.count.is_some_and(|n| updates >= n) {
@@ -326,6 +329,8 @@ struct MjcfOutput {
     written_at: Option<Instant>,
     /// Objects already warned about, so a shape that cannot collide is said once.
     warned: std::collections::HashSet<u64>,
+    /// Objects already said to be held still.
+    held_still: std::collections::HashSet<u64>,
 }
 
 impl MjcfOutput {
@@ -342,6 +347,11 @@ impl MjcfOutput {
         for (id, why) in &update.left_out {
             if self.warned.insert(*id) {
                 tracing::warn!("object {id} is left out of the MuJoCo scene: {why}");
+            }
+        }
+        for (id, why) in &update.held_still {
+            if self.held_still.insert(*id) {
+                tracing::info!("object {id} is static in the MuJoCo scene: {why}");
             }
         }
         let written = write_mjcf(dir, &update.scene, &MjcfConfig::default())
