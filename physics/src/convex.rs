@@ -391,7 +391,8 @@ pub fn convex_parts_with(
         let found: Vec<Hull> = match decompose(mesh, config) {
             Ok(parts) => parts.iter().filter_map(|points| Hull::of(points)).collect(),
             Err(why) => {
-                tracing::warn!("convex decomposition failed ({why}); using the convex hull");
+                // The caller's `decompose` knows its failures (and says them as it sees fit).
+                tracing::debug!("convex decomposition failed ({why}); using the convex hull");
                 Vec::new()
             }
         };

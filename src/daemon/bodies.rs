@@ -71,16 +71,35 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
         };
         heartbeat.beat();
         let started = Instant::now();
-        let decompose = |mesh: &TriMesh, config: &ConvexConfig| match &exe {
-            Some(exe) => crate::isolated_vhacd::decompose(
-                exe,
-                mesh,
-                config,
-                crate::isolated_vhacd::CHILD_TIMEOUT,
-            ),
-            None => Err("the daemon's own executable cannot be found".into()),
+        let mut child_failed = None;
+        let decompose = |mesh: &TriMesh, config: &ConvexConfig| {
+            let parts = match &exe {
+                Some(exe) => crate::isolated_vhacd::decompose(
+                    exe,
+                    mesh,
+                    config,
+                    crate::isolated_vhacd::CHILD_TIMEOUT,
+                ),
+                None => Err("the daemon's own executable cannot be found".into()),
+            };
+            if let Err(why) = &parts {
+                child_failed = Some(why.clone());
+            }
+            parts
         };
         let made = make_body(&job, decompose);
+        if let Some(why) = child_failed {
+            // The first failure and every power of two after it: a binary replaced under a
+            // running daemon fails every time, and one line a body would flood the log.
+            let failed = Counters::add(&shared.counters.decompositions_failed, 1) + 1;
+            if failed.is_power_of_two() {
+                tracing::warn!(
+                    "object {}: the V-HACD child failed ({why}); its body is one convex hull \
+                     ({failed} such so far)",
+                    job.object_id
+                );
+            }
+        }
         shared.counters.record(Stage::Body, started.elapsed());
         match made {
             Ok(body) => {
@@ -165,4 +184,67 @@ pub fn make_body(
         encoding: Encoding::Full,
         hulls,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(mesh: TriMesh) -> BodyJob {
+        BodyJob {
+            object_id: 3,
+            shape_version: 7,
+            mesh_in_object: mesh,
+            viewpoint_in_object: Some(Vec3::new(0.0, -2.0, 1.0)),
+            support: None,
+            margin_m: 0.004,
+        }
+    }
+
+    /// A closed shape is its own proxy; its body carries no proxy mesh, its mass is the
+    /// shape's, and a failed decomposition leaves it one conservative hull.
+    #[test]
+    fn a_closed_shape_is_its_own_proxy_and_a_failed_decomposition_is_one_hull() {
+        let torus = tacmesh_sim::torus(24, 12, 0.4, 0.1);
+        let body = make_body(&job(torus.clone()), |m, c| {
+            Ok(tacmesh_physics::vhacd_part_points(m, c))
+        })
+        .expect("a torus has a body");
+        assert_eq!(body.proxy, BodyProxy::Shape);
+        assert!(body.mesh.triangles.is_empty(), "the shape is not repeated");
+        assert_eq!((body.object_id, body.shape_version), (3, 7));
+        assert!(body.hulls.len() >= 3, "{} hulls", body.hulls.len());
+        let exact = MassProperties::of_closed_mesh(&torus).expect("a closed torus");
+        assert!((body.volume_m3 - exact.volume_m3).abs() < 1e-6);
+        let fallback =
+            make_body(&job(torus), |_, _| Err("the child crashed".into())).expect("still a body");
+        assert_eq!(fallback.hulls.len(), 1);
+    }
+
+    /// An open shell with no support is swept along the sensor's rays and capped: a closed
+    /// shadow volume, grown by the margin, larger than nothing.
+    #[test]
+    fn a_one_view_shell_becomes_a_closed_shadow_volume() {
+        let cube = tacmesh_sim::cube(0.2);
+        // The faces turned to the sensor (at -y, above): the shell it saw.
+        let eye = Vec3::new(0.0, -2.0, 1.0);
+        let seen: Vec<[u32; 3]> = cube
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| cube.vertices[i as usize]);
+                (b - a).cross(c - a).dot(eye - a) > 0.0
+            })
+            .collect();
+        let shell = TriMesh::new(cube.vertices.clone(), seen);
+        let body = make_body(&job(shell), |m, c| {
+            Ok(tacmesh_physics::vhacd_part_points(m, c))
+        })
+        .expect("a shell has a body");
+        assert_eq!(body.proxy, BodyProxy::ShadowVolume);
+        assert!(!body.mesh.triangles.is_empty());
+        assert!(body.volume_m3 > 0.2f32.powi(3), "{} m³", body.volume_m3);
+        assert_eq!(body.margin_m, 0.004);
+    }
 }

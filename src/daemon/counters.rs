@@ -71,6 +71,8 @@ pub struct Counters {
     /// Collision bodies made, and shapes that got none (see `bodies`).
     pub bodies_made: AtomicU64,
     pub body_failures: AtomicU64,
+    /// V-HACD children that failed, crashed or overran (those bodies fell back to one hull).
+    pub decompositions_failed: AtomicU64,
     /// Objects created and removed by the tracker, whether confirmed or not: on a static
     /// scene both should stop once it has been seen (churn, see [`Counters::births_per_s`]).
     pub objects_born: AtomicU64,
@@ -97,6 +99,7 @@ impl Default for Counters {
             pose_updates: AtomicU64::new(0),
             bodies_made: AtomicU64::new(0),
             body_failures: AtomicU64::new(0),
+            decompositions_failed: AtomicU64::new(0),
             objects_born: AtomicU64::new(0),
             objects_removed: AtomicU64::new(0),
             recent_births: Mutex::new(std::collections::VecDeque::new()),
@@ -127,6 +130,7 @@ pub struct CounterSnapshot {
     pub pose_updates: u64,
     pub bodies_made: u64,
     pub body_failures: u64,
+    pub decompositions_failed: u64,
     pub objects_born: u64,
     pub objects_removed: u64,
     /// Object births per second over the last [`BIRTH_WINDOW`] (or since start, if shorter).
@@ -140,8 +144,9 @@ pub struct CounterSnapshot {
 }
 
 impl Counters {
-    pub fn add(counter: &AtomicU64, n: u64) {
-        counter.fetch_add(n, Ordering::Relaxed);
+    /// Adds `n` to `counter`; returns its value before.
+    pub fn add(counter: &AtomicU64, n: u64) -> u64 {
+        counter.fetch_add(n, Ordering::Relaxed)
     }
 
     pub fn record(&self, stage: Stage, elapsed: Duration) {
@@ -219,6 +224,7 @@ impl Counters {
             pose_updates: load(&self.pose_updates),
             bodies_made: load(&self.bodies_made),
             body_failures: load(&self.body_failures),
+            decompositions_failed: load(&self.decompositions_failed),
             objects_born: load(&self.objects_born),
             objects_removed: load(&self.objects_removed),
             births_per_s,
@@ -278,7 +284,7 @@ impl CounterSnapshot {
             .collect();
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
-             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}), shapes published {}, bodies published {}, poses published {}, \
+             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}, V-HACD fell back {}), shapes published {}, bodies published {}, poses published {}, \
              bytes sent {}, subscribers {} (dropped {}, refused {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
@@ -297,6 +303,7 @@ impl CounterSnapshot {
             self.pose_updates,
             self.bodies_made,
             self.body_failures,
+            self.decompositions_failed,
             self.publisher.shapes_published,
             self.publisher.bodies_published,
             self.publisher.poses_published,
