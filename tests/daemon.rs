@@ -186,6 +186,18 @@ impl Received {
         Some((body, proxy, hulls))
     }
 
+    /// Whether every object (not the supports) holds the body of its latest shape.
+    fn every_body_is_current(&self) -> bool {
+        self.scene
+            .objects()
+            .filter(|o| o.object_id() < FIRST_PLANE_ID)
+            .all(|o| {
+                o.body
+                    .as_ref()
+                    .is_some_and(|b| b.shape_version == o.shape.version())
+            })
+    }
+
     /// The latest state of every object still there.
     pub(crate) fn latest_meshes(&self) -> BTreeMap<u64, Shape> {
         self.scene
@@ -325,6 +337,22 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         processed(&last)
     );
     assert_eq!(last.objects_tracked, 3, "{last:?}");
+
+    // Each object's body is made from its shape off the mesher's thread, at a low priority:
+    // on a loaded machine it comes a while after the shape. Wait until every object holds the
+    // body of its latest shape (the deadline only stops a hang).
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !got.every_body_is_current() {
+        assert!(
+            Instant::now() < deadline,
+            "bodies still behind their shapes after a minute"
+        );
+        Received::collect(
+            &mut subscription,
+            Instant::now() + Duration::from_millis(500),
+            &mut got,
+        );
+    }
 
     let latest = got.latest_meshes();
     let planes: Vec<_> = latest

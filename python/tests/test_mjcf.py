@@ -149,7 +149,9 @@ def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(tmp_path: Pat
     finally:
         running.stop()
     assert model.nbody - 1 >= 4, printed
-    assert sum(line.startswith("body object") for line in printed.splitlines()) >= 4, printed
+    # Bodies follow their shapes off the frame path: some may not have come by then (those
+    # objects are their straight-down extrusions in the scene meanwhile).
+    assert sum(line.startswith("body object") for line in printed.splitlines()) >= 2, printed
     # Most of them are free bodies; one that does not stand on the table by itself (a fragment
     # held up by another object) is held still (a body without a joint).
     free = int(np.sum(model.body_dofnum[1:] > 0))
