@@ -91,7 +91,31 @@ def shape(object_id, version, vertices, triangles, compact=False):
     return frame(0x08, payload)
 
 
-def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=3, ids=()):
+def body(object_id, version, vertices, triangles, compact=False):
+    # A shadow-volume body (docs/protocol.md, Body): the proxy in either encoding, then one
+    # hull of the same vertices, full precision with byte indices.
+    payload = struct.pack("<QQBff3f6fBII", object_id, version, 1, 0.004, 1e-4,
+                          0.03, 0.03, 0.03, 1e-6, 1e-6, 1e-6, 0, 0, 0,
+                          1 if compact else 0, len(vertices), len(triangles))
+    if compact:
+        lo = [min(v[k] for v in vertices) for k in range(3)]
+        hi = [max(v[k] for v in vertices) for k in range(3)]
+        payload += struct.pack("<6f", *lo, *hi)
+        step = [(h - l) / 65535 if h > l else 1.0 for l, h in zip(lo, hi)]
+        payload += b"".join(
+            struct.pack("<3H", *(round((v[k] - lo[k]) / step[k]) for k in range(3)))
+            for v in vertices)
+        payload += b"".join(struct.pack("<3H", *t) for t in triangles)
+    else:
+        payload += b"".join(struct.pack("<3f", *v) for v in vertices)
+        payload += b"".join(struct.pack("<3I", *t) for t in triangles)
+    payload += struct.pack("<BBH", 1, len(vertices), len(triangles))
+    payload += b"".join(struct.pack("<3f", *v) for v in vertices)
+    payload += b"".join(struct.pack("<3B", *t) for t in triangles)
+    return frame(0x0B, payload)
+
+
+def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=7, ids=()):
     payload = struct.pack("<BBfBI", encoding, resend, rate_hz, kinds, len(ids))
     payload += b"".join(struct.pack("<Q", i) for i in ids)
     return frame(0x81, payload)
@@ -100,7 +124,7 @@ def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=3, ids=()):
 def wire_seeds():
     tetrahedron = ([(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0, 0, 0.1)],
                    [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)])
-    hello = frame(0x01, struct.pack("<H", 2) + text("tacmesh 0.1.0"))
+    hello = frame(0x01, struct.pack("<H", 3) + text("tacmesh 0.1.0"))
     options = subscribe()[5:]
     session = frame(0x07, struct.pack("<QQ", 5_000_000_000, 1_700_000_005_000_000_000) + options)
     stats = frame(0x0A, struct.pack("<19QIffI", 2_000_000_000, 1_700_000_002_000_000_000, 900,
@@ -109,7 +133,8 @@ def wire_seeds():
                   + text("reconstruct") + struct.pack("<2f", 4.0, 9.5)
                   + text("simplify") + struct.pack("<2f", 1.5, 3.25))
     goodbye = frame(0x06, text("shutting down"))
-    server = (hello + session + shape(7, 1, *tetrahedron) + frame(0x09, pose(7, 1))
+    server = (hello + session + shape(7, 1, *tetrahedron) + body(7, 1, *tetrahedron)
+              + body(7, 1, *tetrahedron, compact=True) + frame(0x09, pose(7, 1))
               + frame(0x04) + shape(7, 2, *tetrahedron, compact=True)
               + frame(0x09, pose(7, 2, 2_000_000_000)) + frame(0x03, struct.pack("<Q", 7))
               + stats + goodbye)
@@ -123,6 +148,8 @@ def wire_seeds():
         "shape-compact": b"\xff" + shape(1, 1, *tetrahedron, compact=True),
         "shape-empty": b"\xff" + shape(2, 1, [], []),
         "pose": b"\xff" + frame(0x09, pose(3, 4)),
+        "body": b"\xff" + body(1, 1, *tetrahedron),
+        "body-compact": b"\xff" + body(1, 1, *tetrahedron, compact=True),
         "stats": b"\xff" + stats,
         "goodbye": b"\xff" + goodbye,
         "client-subscribe": b"\x03" + subscribe() + subscribe(1, 1, 10.0, 1, (4, 5)),

@@ -14,13 +14,15 @@
 //!   - re-encoded compactly it decodes to the same shape but for its vertices and a residual
 //!     no smaller, unless the box spans more than an `f32` holds or the residual plus the
 //!     bound overflows (both only for coordinates near `f32::MAX`);
+//! - a Body whose proxy is compact likewise: in the full encoding it decodes to the same body,
+//!   and compactly to the same body but for its proxy's vertices;
 //! - the decoder never buffers more than one frame beyond what was taken out.
 
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use tacmesh_protocol::{
-    encode, Encoding, FrameDecoder, Message, Sender, Shape, WireError, MAX_FRAME_BYTES,
+    encode, Body, Encoding, FrameDecoder, Message, Sender, Shape, WireError, MAX_FRAME_BYTES,
 };
 
 /// Bytes of the length prefix.
@@ -50,6 +52,9 @@ fn decode_stream(stream: &[u8], from: Sender, chunk_len: usize) {
                     match &message {
                         Message::Shape(shape) if shape.encoding == Encoding::Compact => {
                             check_compact_shape(shape, from);
+                        }
+                        Message::Body(body) if body.encoding == Encoding::Compact => {
+                            check_compact_body(body, from);
                         }
                         _ => {
                             let mut encoded = Vec::new();
@@ -108,6 +113,33 @@ fn check_compact_shape(shape: &Shape, from: Sender) {
             value,
         }) if value.is_infinite() => {}
         Err(err) => panic!("a decoded compact shape does not encode again: {err}"),
+    }
+}
+
+/// The round trips a decoded body with a compact proxy must survive (see the top of the file).
+fn check_compact_body(body: &Body, from: Sender) {
+    let full = Message::Body(Body {
+        encoding: Encoding::Full,
+        ..body.clone()
+    });
+    match round_trip(&full, from) {
+        Ok(again) => assert_eq!(again, full, "a compact body changed in the full encoding"),
+        Err(WireError::FrameTooLarge { .. }) => {}
+        Err(err) => panic!("a decoded compact body does not encode in full: {err}"),
+    }
+    match round_trip(&Message::Body(body.clone()), from) {
+        Ok(Message::Body(again)) => {
+            assert_eq!(again.mesh.triangles, body.mesh.triangles);
+            assert_eq!(again.mesh.vertices.len(), body.mesh.vertices.len());
+            let same_but_geometry = Body {
+                mesh: again.mesh.clone(),
+                ..body.clone()
+            };
+            assert_eq!(again, same_but_geometry);
+        }
+        Ok(other) => panic!("a Body came back as {other:?}"),
+        Err(WireError::CompactBoxTooLarge { .. }) => {}
+        Err(err) => panic!("a decoded compact body does not encode again: {err}"),
     }
 }
 

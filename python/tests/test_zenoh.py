@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tacmesh import Pose, Shape, SnapshotDone, Subscriber, ZenohSubscriber
+from tacmesh import Body, Pose, Shape, SnapshotDone, Subscriber, ZenohSubscriber
 from tacmesh.over_zenoh import decode_sample
 from tacmesh.wire import WireError
 
@@ -95,7 +95,11 @@ def test_a_late_joiner_gets_the_scene_by_query_then_the_moves(daemon: ZenohDaemo
                 break
         shapes = [m for m in snapshot if isinstance(m, Shape)]
         assert len(shapes) >= 5, f"{len(shapes)} shapes in the scene's answer"
-        assert all(isinstance(m, (Shape, Pose)) for m in snapshot[:-1])
+        # The scene's answer: each object's shape, its collision body when it has one (protocol
+        # 3), its newer pose.
+        assert all(isinstance(m, (Shape, Body, Pose)) for m in snapshot[:-1])
+        bodies = [m for m in snapshot if isinstance(m, Body)]
+        assert all(b.object_id in {s.object_id for s in shapes} for b in bodies)
         first = {o.object_id: np.array(o.pose.translation) for o in sub.scene.non_supports}
         moves = 0
         deadline = time.monotonic() + 5
