@@ -72,22 +72,26 @@ def pose(object_id, shape_version, time_ns=1_000_000_000):
                        0, 0, 0, 1, 0.1, -0.2, 1.0, 0.05, 0, 0, 0, 0, 0.3)
 
 
+def geometry(vertices, triangles, compact):
+    # A Shape's (and a Body proxy's) vertices and triangles: full, or the compact box, 16-bit
+    # steps and u16 indices.
+    if not compact:
+        return (b"".join(struct.pack("<3f", *v) for v in vertices)
+                + b"".join(struct.pack("<3I", *t) for t in triangles))
+    lo = [min((v[k] for v in vertices), default=0.0) for k in range(3)]
+    hi = [max((v[k] for v in vertices), default=0.0) for k in range(3)]
+    step = [(h - l) / 65535 if h > l else 1.0 for l, h in zip(lo, hi)]
+    return (struct.pack("<6f", *lo, *hi)
+            + b"".join(struct.pack("<3H", *(round((v[k] - lo[k]) / step[k]) for k in range(3)))
+                       for v in vertices)
+            + b"".join(struct.pack("<3H", *t) for t in triangles))
+
+
 def shape(object_id, version, vertices, triangles, compact=False):
     payload = pose(object_id, version) + struct.pack(
         "<QQBIIfBII", 900_000_000, 1_700_000_000_900_000_000, 0, 2 * len(triangles),
         len(triangles), 0.002, 1 if compact else 0, len(vertices), len(triangles))
-    if compact:
-        lo = [min((v[k] for v in vertices), default=0.0) for k in range(3)]
-        hi = [max((v[k] for v in vertices), default=0.0) for k in range(3)]
-        payload += struct.pack("<6f", *lo, *hi)
-        step = [(h - l) / 65535 if h > l else 1.0 for l, h in zip(lo, hi)]
-        payload += b"".join(
-            struct.pack("<3H", *(round((v[k] - lo[k]) / step[k]) for k in range(3)))
-            for v in vertices)
-        payload += b"".join(struct.pack("<3H", *t) for t in triangles)
-    else:
-        payload += b"".join(struct.pack("<3f", *v) for v in vertices)
-        payload += b"".join(struct.pack("<3I", *t) for t in triangles)
+    payload += geometry(vertices, triangles, compact)
     return frame(0x08, payload)
 
 
@@ -97,18 +101,7 @@ def body(object_id, version, vertices, triangles, compact=False):
     payload = struct.pack("<QQBff3f6fBII", object_id, version, 1, 0.004, 1e-4,
                           0.03, 0.03, 0.03, 1e-6, 1e-6, 1e-6, 0, 0, 0,
                           1 if compact else 0, len(vertices), len(triangles))
-    if compact:
-        lo = [min(v[k] for v in vertices) for k in range(3)]
-        hi = [max(v[k] for v in vertices) for k in range(3)]
-        payload += struct.pack("<6f", *lo, *hi)
-        step = [(h - l) / 65535 if h > l else 1.0 for l, h in zip(lo, hi)]
-        payload += b"".join(
-            struct.pack("<3H", *(round((v[k] - lo[k]) / step[k]) for k in range(3)))
-            for v in vertices)
-        payload += b"".join(struct.pack("<3H", *t) for t in triangles)
-    else:
-        payload += b"".join(struct.pack("<3f", *v) for v in vertices)
-        payload += b"".join(struct.pack("<3I", *t) for t in triangles)
+    payload += geometry(vertices, triangles, compact)
     payload += struct.pack("<BBH", 1, len(vertices), len(triangles))
     payload += b"".join(struct.pack("<3f", *v) for v in vertices)
     payload += b"".join(struct.pack("<3B", *t) for t in triangles)
