@@ -424,14 +424,11 @@ impl Publisher {
             }
         }
         let encode_as = |encoding: Encoding| {
-            let mut bytes = Vec::new();
-            let shape = Shape {
+            frame_of(&Message::Shape(Shape {
                 encoding,
                 ..shape.clone()
-            };
-            encode(&Message::Shape(shape), &mut bytes)
-                .map(|()| bytes)
-                .map_err(|cause| PublishError::EncodeShape { object_id, cause })
+            }))
+            .map_err(|cause| PublishError::EncodeShape { object_id, cause })
         };
         let frames = Arc::new(EncodedShape {
             version,
@@ -517,14 +514,11 @@ impl Publisher {
         let object_id = body.object_id;
         let version = body.shape_version;
         let encode_as = |encoding: Encoding| {
-            let mut bytes = Vec::new();
-            let body = Body {
+            frame_of(&Message::Body(Body {
                 encoding,
                 ..body.clone()
-            };
-            encode(&Message::Body(body), &mut bytes)
-                .map(|()| bytes)
-                .map_err(|cause| PublishError::EncodeBody { object_id, cause })
+            }))
+            .map_err(|cause| PublishError::EncodeBody { object_id, cause })
         };
         let frames = Arc::new(EncodedBody {
             shape_version: version,
@@ -721,6 +715,12 @@ impl Drop for Publisher {
     fn drop(&mut self) {
         self.shutdown("the daemon is shutting down");
     }
+}
+
+/// One message as one frame.
+fn frame_of(message: &Message) -> Result<Vec<u8>, WireError> {
+    let mut bytes = Vec::new();
+    encode(message, &mut bytes).map(|()| bytes)
 }
 
 fn cap_at_char_boundary(text: &str, max: usize) -> &str {
