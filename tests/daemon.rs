@@ -80,21 +80,9 @@ impl Daemon {
         }
     }
 
-    /// Connects, retrying while the connection is refused: the socket file appears when the
-    /// daemon binds it, a moment before it listens.
+    /// Connects: the socket file appears only once the daemon listens on it.
     fn subscribe(&self) -> Subscription {
-        let started = Instant::now();
-        loop {
-            match Subscription::connect(&self.socket, Some(Duration::from_secs(10))) {
-                Err(tacmesh::subscriber::SubscribeError::Connect { cause, .. })
-                    if cause.kind() == std::io::ErrorKind::ConnectionRefused
-                        && started.elapsed() < Duration::from_secs(5) =>
-                {
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                other => return other.expect("subscribes"),
-            }
-        }
+        Subscription::connect(&self.socket, Some(Duration::from_secs(10))).expect("subscribes")
     }
 
     /// Sends SIGTERM; returns the exit status and how long the exit took.

@@ -4,7 +4,7 @@
 use std::io::ErrorKind;
 use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
 use std::os::unix::net::{UnixListener, UnixStream};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::PublishError;
 
@@ -27,36 +27,95 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
     }
     clear_stale(path)?;
 
-    let listener = UnixListener::bind(path).map_err(|source| match source.kind() {
+    // The socket file appears only once it is listening and has its mode: a client that waits
+    // for the file and then connects is never refused. `UnixListener::bind` binds and then
+    // listens, so the socket is bound under a private name beside `path`, given its mode and
+    // group there, and hard-linked to `path` (which fails if `path` exists: another daemon won
+    // the race between our check and our link).
+    let listener = match bind_privately(path, mode, group)? {
+        Some(listener) => listener,
+        // No private name could be bound or linked (too long for a socket address, or a file
+        // system without hard links): bind in place, where a client may be refused for the
+        // moment before `listen`.
+        None => {
+            let listener = UnixListener::bind(path).map_err(|source| bind_error(path, source))?;
+            if let Err(error) = prepare(path, path, mode, group) {
+                remove_if_ours(path, file_id(path));
+                return Err(error);
+            }
+            listener
+        }
+    };
+    Ok(Bound {
+        listener,
+        file_id: file_id(path),
+    })
+}
+
+/// Binds under a private name beside `path`, sets its mode and group, and links it to `path`;
+/// `None` if the private name cannot be bound or linked.
+fn bind_privately(
+    path: &Path,
+    mode: u32,
+    group: Option<u32>,
+) -> Result<Option<UnixListener>, PublishError> {
+    let Some(private) = private_name(path) else {
+        return Ok(None);
+    };
+    let _ = std::fs::remove_file(&private); // left by an earlier process with our pid
+    let Ok(listener) = UnixListener::bind(&private) else {
+        return Ok(None);
+    };
+    let linked = prepare(&private, path, mode, group).and_then(|()| {
+        match std::fs::hard_link(&private, path) {
+            Ok(()) => Ok(true),
+            // Another daemon won the race between our check and our link.
+            Err(source) if source.kind() == ErrorKind::AlreadyExists => {
+                Err(bind_error(path, source))
+            }
+            Err(_) => Ok(false),
+        }
+    });
+    let _ = std::fs::remove_file(&private);
+    Ok(linked?.then_some(listener))
+}
+
+/// `.NAME.PID.binding` beside `path`, if `path` has a file name.
+fn private_name(path: &Path) -> Option<PathBuf> {
+    let name = path.file_name()?.to_str()?;
+    Some(path.with_file_name(format!(".{name}.{}.binding", std::process::id())))
+}
+
+fn bind_error(path: &Path, source: std::io::Error) -> PublishError {
+    match source.kind() {
         // Another daemon won the race between our check and our bind.
-        ErrorKind::AddrInUse => PublishError::AlreadyRunning {
+        ErrorKind::AddrInUse | ErrorKind::AlreadyExists => PublishError::AlreadyRunning {
             path: path.to_path_buf(),
         },
         _ => PublishError::Bind {
             path: path.to_path_buf(),
             cause: source,
         },
-    })?;
-    let file_id = file_id(path);
-    if let Err(source) = std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)) {
-        remove_if_ours(path, file_id);
-        return Err(PublishError::SetMode {
+    }
+}
+
+/// Gives the socket file at `at` (to be published as `path`) its mode and group.
+fn prepare(at: &Path, path: &Path, mode: u32, group: Option<u32>) -> Result<(), PublishError> {
+    std::fs::set_permissions(at, std::fs::Permissions::from_mode(mode)).map_err(|source| {
+        PublishError::SetMode {
             path: path.to_path_buf(),
             mode,
             cause: source,
-        });
-    }
-    if let Some(gid) = group {
-        if let Err(source) = std::os::unix::fs::chown(path, None, Some(gid)) {
-            remove_if_ours(path, file_id);
-            return Err(PublishError::SetGroup {
-                path: path.to_path_buf(),
-                gid,
-                cause: source,
-            });
         }
+    })?;
+    if let Some(gid) = group {
+        std::os::unix::fs::chown(at, None, Some(gid)).map_err(|source| PublishError::SetGroup {
+            path: path.to_path_buf(),
+            gid,
+            cause: source,
+        })?;
     }
-    Ok(Bound { listener, file_id })
+    Ok(())
 }
 
 /// Leaves `path` free to bind, or says why it cannot be.

@@ -355,6 +355,28 @@ fn stale_socket_is_removed_and_bind_succeeds() {
     client.hello();
 }
 
+/// The socket file appears only once the daemon listens: a client that sees the file connects
+/// (no refusal between bind and listen), and no private name is left beside it.
+#[test]
+fn the_socket_file_appears_listening_and_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = socket_in(&dir);
+    let publisher = std::thread::spawn({
+        let path = path.clone();
+        move || publisher(&path)
+    });
+    while !path.exists() {
+        std::thread::yield_now();
+    }
+    std::os::unix::net::UnixStream::connect(&path).expect("listening as soon as it exists");
+    let _publisher = publisher.join().unwrap();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name())
+        .collect();
+    assert_eq!(names, [path.file_name().unwrap()]);
+}
+
 #[test]
 fn live_publisher_makes_second_bind_fail() {
     let dir = tempfile::tempdir().unwrap();
