@@ -111,7 +111,9 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     } else {
         NonFinite::Drop
     };
+    let reading = std::time::Instant::now();
     let mut file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
+    let read_ms = reading.elapsed().as_secs_f64() * 1e3;
     if file.non_finite > 0 {
         tracing::info!(
             "{}: left out {} points with a NaN or infinite coordinate",
@@ -145,6 +147,8 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         super::print_json(&MeshOutput {
             non_finite_points: file.non_finite,
             viewpoint: viewpoint.map(|v| v.to_array()),
+            read_ms,
+            peak_memory_mb: peak_resident_mb(),
             report,
         })?;
     } else {
@@ -187,8 +191,21 @@ struct MeshOutput {
     non_finite_points: usize,
     /// Where the normals were made to face, `null` when they were oriented by propagation.
     viewpoint: Option<[f32; 3]>,
+    /// Reading and parsing the file, milliseconds (not in the report's `total_ms`).
+    read_ms: f64,
+    /// The process's peak resident memory so far (reading, meshing, writing), MiB; `null`
+    /// where the kernel does not say (`VmHWM` in `/proc/self/status`, Linux).
+    peak_memory_mb: Option<f64>,
     #[serde(flatten)]
     report: tacmesh::pipeline::MeshReport,
+}
+
+/// The peak resident set of this process, MiB, from `/proc/self/status`.
+fn peak_resident_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 /// One line of `--objects --json`.
