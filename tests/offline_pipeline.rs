@@ -305,3 +305,63 @@ fn eval_contact_reports_every_radius_in_millimetres_and_degrees() {
         assert!(figure("penetration_mm", "mean") < 4.0, "{row}");
     }
 }
+
+/// Issue 14's robustness bounds, on seeds the tuning did not see: at 40 mm noise (40,000
+/// points) and at 5,000 points (20 mm noise) every shape comes out as one closed piece with no
+/// more faces than the paper's Table 1 gives at 20 mm and dense clouds, and within 1.5 times
+/// its error. Before the voxel followed the noise and the spacing, the cube had 490–717 faces
+/// at 40 mm, and at 5,000 points every mesh was open and in pieces.
+#[test]
+fn high_noise_and_sparse_clouds_close_with_few_faces() {
+    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
+    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
+    // (shape, Table 1's faces, Table 1's MHE in metres)
+    let table1 = [
+        (Shape::Cone, 104, 0.00887),
+        (Shape::Cube, 118, 0.00488),
+        (Shape::Cylinder, 158, 0.00748),
+        (Shape::Monkey, 926, 0.0213),
+        (Shape::Torus, 134, 0.0143),
+        (Shape::Sphere, 116, 0.0111),
+    ];
+    let mut failures = Vec::new();
+    for (points, noise_m) in [(40_000, 0.04), (5_000, 0.02)] {
+        for (shape, faces_bound, mhe_bound) in table1 {
+            let truth = shape.mesh();
+            let cloud = sample_cloud(
+                &truth,
+                &SampleConfig {
+                    points,
+                    noise_sigma_m: noise_m,
+                    seed: 21,
+                },
+            )
+            .expect("samples");
+            let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
+            let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
+                .expect("measures")
+                .mhe_m;
+            let line = format!(
+                "{} at {points} points, {:.0} mm: {} faces, {} pieces, closed {}, MHE {mhe:.5} \
+                 (voxel {:.1} mm, noise {:.1} mm, spacing {:.1} mm)",
+                shape.name(),
+                noise_m * 1e3,
+                report.faces,
+                report.pieces,
+                report.closed,
+                report.voxel_size_m * 1e3,
+                report.noise_m * 1e3,
+                report.spacing_m * 1e3,
+            );
+            println!("{line}");
+            if !(report.closed
+                && report.pieces == 1
+                && report.faces <= faces_bound
+                && mhe <= 1.5 * mhe_bound)
+            {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}

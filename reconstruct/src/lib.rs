@@ -14,6 +14,7 @@ pub mod enclosed_band;
 pub mod marching_cubes;
 pub mod moment_grid;
 pub mod moments;
+pub mod noise;
 pub mod signed_distance;
 pub mod sparse_sdf;
 pub mod surface;

@@ -21,7 +21,8 @@ pub struct MeshArgs {
     /// Output mesh: .ply or .obj (a folder with --objects)
     #[arg(short, long)]
     output: PathBuf,
-    /// Marching-cubes voxel edge in metres [default: 1/50 of the cloud's largest side]
+    /// Marching-cubes voxel edge in metres, used as given [default: 1/50 of the cloud's largest
+    /// side, grown for noisy or sparse clouds (see the README)]
     #[arg(long)]
     voxel_m: Option<f32>,
     /// Residual bound in metres: how far simplification may move the surface [default: 2.5 % of

@@ -1,0 +1,130 @@
+//! How noisy a cloud is: the spread of its points across the surface, from the same
+//! plane fits the reconstruction makes.
+//!
+//! In a box of the surface a few noise widths across, the points' covariance has two large
+//! eigenvalues (the surface's extent in the box) and a small one along the normal: the noise's
+//! variance plus what the surface's curvature adds. The median over boxes of the square root
+//! of that smallest eigenvalue estimates the noise's standard deviation: curved boxes and
+//! boxes across edges spread more, but they are the minority on any object larger than a few
+//! boxes, and the median ignores them.
+//!
+//! Entry point: [`estimate_noise_m`].
+
+use glam::Vec3;
+
+use crate::moment_grid::MomentGrid;
+
+/// At most this many points go into the estimate (an even subsample of the cloud): the median
+/// of a few hundred boxes is as good as that of thousands, and the estimate stays cheap.
+const MAX_POINTS: usize = 8_000;
+
+/// Boxes with fewer points than this are not used.
+const MIN_POINTS_PER_BOX: f64 = 10.0;
+
+/// Fewer usable boxes than this: no estimate.
+const MIN_BOXES: usize = 8;
+
+/// The standard deviation of the points' spread across the surface, metres, estimated over
+/// boxes three cells wide centred on the surface, cells at least `cell_m` wide: a box narrower
+/// than the noise clips it, so when the spread found is more than a third of the box the
+/// estimate is made again with cells twice the spread. `None` when too few boxes hold enough
+/// points.
+pub fn estimate_noise_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
+    if !(cell_m.is_finite() && cell_m > 0.0) {
+        return None;
+    }
+    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    let sample: Vec<Vec3> = points
+        .iter()
+        .step_by(stride)
+        .copied()
+        .filter(|p| p.is_finite())
+        .collect();
+    let mut cell_m = cell_m;
+    let mut estimate = median_spread_m(&sample, cell_m)?;
+    for _ in 0..2 {
+        if estimate <= cell_m / 2.0 {
+            break;
+        }
+        cell_m = 2.0 * estimate;
+        estimate = median_spread_m(&sample, cell_m)?;
+    }
+    Some(estimate)
+}
+
+/// The median, over boxes of 3 × 3 × 3 cells whose points' plane crosses the middle cell, of
+/// the points' standard deviation along the plane's normal.
+fn median_spread_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
+    let mut grid = MomentGrid::new(cell_m);
+    for &p in points {
+        grid.add_point(p);
+    }
+    let mut spreads: Vec<f64> = grid
+        .sorted_cells()
+        .into_iter()
+        .filter_map(|cell| {
+            let around = grid.neighbourhood(cell, 1);
+            if around.count < MIN_POINTS_PER_BOX {
+                return None;
+            }
+            let plane = around.plane()?;
+            // A box beside the surface holds only one tail of the noise: only boxes centred on
+            // it measure the whole spread.
+            let centre = (cell.as_vec3() + 0.5) * cell_m;
+            if plane.normal.dot(centre - plane.point).abs() > cell_m / 2.0 {
+                return None;
+            }
+            let normal = plane.normal.as_dvec3();
+            let variance = normal.dot(around.covariance() * normal);
+            Some(variance.max(0.0).sqrt())
+        })
+        .collect();
+    if spreads.len() < MIN_BOXES {
+        return None;
+    }
+    let middle = spreads.len() / 2;
+    Some(*spreads.select_nth_unstable_by(middle, f64::total_cmp).1 as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// A 1 m square with Gaussian noise of `sigma_m` across it.
+    fn noisy_square(sigma_m: f32, points: usize) -> Vec<Vec3> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let noise = Normal::new(0.0, sigma_m.max(1e-9)).unwrap();
+        (0..points)
+            .map(|_| {
+                Vec3::new(
+                    rng.random::<f32>(),
+                    rng.random::<f32>(),
+                    if sigma_m > 0.0 {
+                        noise.sample(&mut rng)
+                    } else {
+                        0.0
+                    },
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_noise_of_a_flat_cloud_is_found() {
+        for sigma in [0.0, 0.01, 0.02, 0.04] {
+            let estimate = estimate_noise_m(&noisy_square(sigma, 40_000), 0.06).unwrap();
+            assert!(
+                (estimate - sigma).abs() <= 0.15 * sigma + 1e-4,
+                "σ {sigma}: estimated {estimate}"
+            );
+        }
+    }
+
+    #[test]
+    fn too_few_points_give_no_estimate() {
+        assert_eq!(estimate_noise_m(&noisy_square(0.02, 20), 0.06), None);
+        assert_eq!(estimate_noise_m(&noisy_square(0.02, 1000), 0.0), None);
+    }
+}
