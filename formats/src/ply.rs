@@ -79,6 +79,44 @@ impl PropertyAccess for VertexRecord {
     }
 }
 
+/// One `vertex` element of a cloud without normals: its position only, every other property
+/// ignored. Twelve bytes like the [`Vec3`] it becomes, so the records turn into the cloud's
+/// points in place: a large cloud is held once while it is read, not three times (file,
+/// records, points).
+#[derive(Debug, Default, Clone, Copy)]
+struct PositionRecord([f32; 3]);
+
+impl PositionRecord {
+    fn set(&mut self, property: &str, value: f32) -> PropertyAccessResult {
+        match POSITION_NAMES.iter().position(|&n| n == property) {
+            Some(axis) => {
+                self.0[axis] = value;
+                PropertyAccessResult::Set
+            }
+            None => PropertyAccessResult::Ignored,
+        }
+    }
+}
+
+impl PropertyAccess for PositionRecord {
+    fn new() -> Self {
+        Self::default()
+    }
+
+    fn set_float(&mut self, property: &str, value: f32) -> PropertyAccessResult {
+        self.set(property, value)
+    }
+
+    fn set_double(&mut self, property: &str, value: f64) -> PropertyAccessResult {
+        self.set(property, value as f32)
+    }
+
+    fn get_float(&self, property: &str) -> Option<f32> {
+        let axis = POSITION_NAMES.iter().position(|&n| n == property)?;
+        Some(self.0[axis])
+    }
+}
+
 /// One `face` element as read: its corner indices, every other property ignored.
 #[derive(Debug, Default)]
 struct FaceRecord {
@@ -174,9 +212,8 @@ impl PropertyAccess for Ignored {
 }
 
 /// What [`read`] found.
-struct Contents {
-    vertices: Vec<VertexRecord>,
-    has_normals: bool,
+struct Contents<V> {
+    vertices: Vec<V>,
     /// `None` unless faces were asked for.
     faces: Option<Vec<FaceRecord>>,
 }
@@ -509,18 +546,31 @@ fn set_ascii_list<'t, E: PropertyAccess>(
     Ok(())
 }
 
-/// Reads the header, checks it against the bytes after it, then parses every element in
-/// order: `vertex` into records, `face` too when `faces_wanted`, the rest only to skip them.
-fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, FormatError> {
+/// A reader of a PLY held in memory.
+type BytesReader<'a> = Reader<Cursor<&'a [u8]>>;
+
+/// The header, and a reader at the first byte after it.
+fn read_header<'a>(bytes: &'a [u8], name: &str) -> Result<(Header, BytesReader<'a>), FormatError> {
     let mut reader = Reader::new(Cursor::new(bytes));
     let header = Parser::<Ignored>::new()
         .read_header(&mut reader)
         .map_err(|e| ply_error(name, &e))?;
+    Ok((header, reader))
+}
+
+/// Reads the header, checks it against the bytes after it, then parses every element in
+/// order: `vertex` into records, `face` too when `faces_wanted`, the rest only to skip them.
+fn read<V: PropertyAccess>(
+    bytes: &[u8],
+    name: &str,
+    faces_wanted: bool,
+) -> Result<Contents<V>, FormatError> {
+    let (header, reader) = read_header(bytes, name)?;
     let body = bytes
         .get(reader.get_ref().position() as usize..)
         .unwrap_or_default();
     check_counts(&header, body, name)?;
-    let has_normals = check_vertex_element(&header, name)?;
+    check_vertex_element(&header, name)?;
     if faces_wanted {
         check_face_element(&header, name)?;
     }
@@ -546,17 +596,13 @@ fn read(bytes: &[u8], name: &str, faces_wanted: bool) -> Result<Contents, Format
         }
     }
     payload.note_leftover(bytes.len(), name)?;
-    Ok(Contents {
-        vertices,
-        has_normals,
-        faces,
-    })
+    Ok(Contents { vertices, faces })
 }
 
 /// Where the elements come from: ascii lines, read here; binary records, read by `ply-rs-bw`.
 enum Payload<'a> {
     Ascii(AsciiLines<'a>),
-    Binary(Reader<Cursor<&'a [u8]>>),
+    Binary(BytesReader<'a>),
 }
 
 impl Payload<'_> {
@@ -615,28 +661,35 @@ fn one_line(message: &str) -> String {
 /// Parses the `vertex` element of a PLY held in memory, in file order, non-finite points
 /// included. `name` is used in error messages.
 pub fn parse_cloud(bytes: &[u8], name: &str) -> Result<PointCloud, FormatError> {
-    let contents = read(bytes, name, false)?;
+    let (header, _) = read_header(bytes, name)?;
+    if !check_vertex_element(&header, name)? {
+        let contents = read::<PositionRecord>(bytes, name, false)?;
+        // Same size and alignment: collected in place, no second buffer.
+        let points: Vec<Vec3> = contents
+            .vertices
+            .into_iter()
+            .map(|PositionRecord(p)| Vec3::from(p))
+            .collect();
+        return Ok(PointCloud::new(points));
+    }
+    let contents = read::<VertexRecord>(bytes, name, false)?;
     let points = contents
         .vertices
         .iter()
         .map(|v| Vec3::from(v.position))
         .collect();
-    Ok(if contents.has_normals {
-        let normals = contents
-            .vertices
-            .iter()
-            .map(|v| Vec3::from(v.normal))
-            .collect();
-        PointCloud::with_normals(points, normals)
-    } else {
-        PointCloud::new(points)
-    })
+    let normals = contents
+        .vertices
+        .iter()
+        .map(|v| Vec3::from(v.normal))
+        .collect();
+    Ok(PointCloud::with_normals(points, normals))
 }
 
 /// Parses a PLY mesh held in memory: vertices in file order, each face of n corners as the
 /// n - 2 triangles of a fan from its first corner. `name` is used in error messages.
 pub fn parse_mesh(bytes: &[u8], name: &str) -> Result<TriMesh, FormatError> {
-    let contents = read(bytes, name, true)?;
+    let contents = read::<VertexRecord>(bytes, name, true)?;
     let vertex_count = contents.vertices.len();
     let mut triangles = Vec::new();
     for (f, face) in contents.faces.unwrap_or_default().iter().enumerate() {
