@@ -8,7 +8,7 @@ use std::time::Instant;
 use serde::Serialize;
 use tacmesh_physics::orientation::{orient_outward, orientation};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
-use tacmesh_reconstruct::noise::estimate_noise_m;
+use tacmesh_reconstruct::noise::{estimate_noise_m, estimate_points_per_m2};
 use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig,
 };
@@ -73,18 +73,21 @@ impl Default for MeshConfig {
 /// σ, when that is more than the relative default. Measured on the six shapes at 40,000 points:
 /// at 40 mm noise (estimated 32–52 mm) voxels of 30 mm meet Table 1's error with fewer faces
 /// than Table 1 where the default 20 mm leaves 150–1,950 faces; at 20 mm noise (estimated
-/// 16–19 mm) the default stays.
+/// 16–19 mm) the default stays. The larger of this and the spacing's voxel is taken.
 pub const NOISE_VOXEL_RATIO: f32 = 0.9;
 
 /// The noise never grows the voxel beyond this multiple of the relative default: a voxel of
 /// 1/25 of the object opens the torus's tube (its smoothing reaches across it).
 pub const MAX_NOISE_VOXEL_GROWTH: f32 = 1.5;
 
-/// The voxel for points spaced `s` apart (median nearest-neighbour distance) is at least this
-/// many `s`. Measured on the six shapes at 5,000 points and 20 mm noise (spacing 12–26 mm):
-/// the cube needs 40 mm voxels to close (the default 20 mm leaves it in pieces with 381
-/// faces), the cone and sphere 30 mm, the monkey and torus close at 20 mm.
-pub const DENSITY_VOXEL_RATIO: f32 = 1.8;
+/// The voxel for points spaced `s` apart on the surface (`s²` square metres per point, see
+/// [`estimate_points_per_m2`]) is at least this many `s`. Measured on the six shapes at 5,000
+/// to 20,000 points and 0 to 30 mm noise (1 m objects, `s` 17–37 mm at 5,000 points): the
+/// cube needs 40–50 mm voxels to close at 5,000 points (the default 20 mm leaves it in
+/// pieces with 381–476 faces), the cone and sphere about 30 mm, the monkey and torus close at
+/// 20–25 mm; 1.2 left the cone open at 10,000 points and 10 mm, and growing the voxel with
+/// noise and spacing together (in quadrature) opened the torus's tube.
+pub const DENSITY_VOXEL_RATIO: f32 = 1.35;
 
 /// The spacing never grows the voxel beyond this multiple of the relative default.
 pub const MAX_DENSITY_VOXEL_GROWTH: f32 = 2.5;
@@ -103,8 +106,8 @@ pub struct MeshReport {
     /// The noise estimated across the surface (standard deviation, metres; see
     /// [`estimate_noise_m`]), 0 when there were too few points to tell.
     pub noise_m: f32,
-    /// The median distance from a point to its nearest neighbour, metres (see
-    /// [`median_point_spacing_m`]), 0 when it could not be told.
+    /// How far apart the points are on the surface, metres: one over the square root of the
+    /// points per square metre (see [`estimate_points_per_m2`]), 0 when it could not be told.
     pub spacing_m: f32,
     pub max_residual_bound_m: f32,
     pub recon_faces: usize,
@@ -301,7 +304,8 @@ pub fn mesh_cloud_with_dense(
         .unwrap_or((hi - lo).max_element());
     let base_voxel_m = config.voxel_size.resolve_m(extent_m);
     let noise_m = estimate_noise_m(&cloud.points, 2.0 * base_voxel_m).unwrap_or(0.0);
-    let spacing_m = median_point_spacing_m(&cloud.points, extent_m).unwrap_or(0.0);
+    let spacing_m = estimate_points_per_m2(&cloud.points, (2.0 * base_voxel_m).max(2.0 * noise_m))
+        .map_or(0.0, |density| density.recip().sqrt());
     let voxel_size_m = match config.voxel_size {
         Length::OfExtent(_) if config.adapt_to_data => {
             let for_noise =
