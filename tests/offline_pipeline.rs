@@ -365,3 +365,63 @@ fn high_noise_and_sparse_clouds_close_with_few_faces() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// The error-target mode aims at a mean error with as few faces as that allows: at Table 1's
+/// MHE the sphere needs half Table 1's faces (116 / 2), and its error stays under the target
+/// (an unseen seed). It takes no residual bound beside it.
+#[test]
+fn error_target_mode_reaches_half_table1_faces_on_the_sphere() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cloud = dir.path().join("sphere.ply");
+    let mesh = dir.path().join("sphere_mesh.ply");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "sphere",
+        "--points",
+        "50000",
+        "--seed",
+        "9",
+        "-o",
+        path_str(&cloud),
+    ]);
+    let report = tacmesh_json(&[
+        "mesh",
+        path_str(&cloud),
+        "-o",
+        path_str(&mesh),
+        "--target-mhe-m",
+        "0.0111",
+        "--json",
+    ]);
+    let eval = tacmesh_json(&["eval", "sphere", path_str(&mesh), "--json"]);
+    let faces = report["faces"].as_u64().expect("faces");
+    let mhe = eval["mhe"].as_f64().expect("mhe");
+    assert!(faces <= 58, "sphere faces {faces}");
+    assert!(mhe <= 0.0111, "sphere MHE {mhe}");
+
+    let both = tacmesh(&[
+        "mesh",
+        path_str(&cloud),
+        "-o",
+        path_str(&mesh),
+        "--target-mhe-m",
+        "0.01",
+        "--max-residual-m",
+        "0.02",
+    ]);
+    assert!(!both.status.success());
+    let bad = tacmesh(&[
+        "mesh",
+        path_str(&cloud),
+        "-o",
+        path_str(&mesh),
+        "--target-mhe-m",
+        "-1",
+    ]);
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("expected a mean error in metres > 0"),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
+}
