@@ -37,7 +37,7 @@ impl Length {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeshConfig {
     /// Marching-cubes cell edge. Relative to the extent, it is the smallest the pipeline uses:
-    /// with [`MeshConfig::adapt_to_noise`] a noisier cloud gets a larger one.
+    /// with [`MeshConfig::adapt_to_data`] a noisy or sparse cloud gets a larger one.
     pub voxel_size: Length,
     /// The simplifier's stop rule: no input-mesh vertex may end farther than this from the
     /// output surface.
