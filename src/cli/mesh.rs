@@ -143,19 +143,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         return mesh_objects(&args, &file, viewpoint);
     }
     let cloud = file.cloud;
-    let mut config = MeshConfig {
-        viewpoint,
-        ..MeshConfig::default()
-    };
-    if let Some(v) = args.voxel_m {
-        config.voxel_size = Length::Metres(v);
-    }
-    if let Some(r) = args.max_residual_m {
-        config.max_residual = Length::Metres(r);
-    }
-    if let Some(target) = args.target_mhe_m {
-        config.max_residual = Length::Metres(residual_for_target_mhe_m(target));
-    }
+    let config = mesh_config(&args, viewpoint);
     let (mesh, report) =
         mesh_cloud(&cloud, &config).with_context(|| format!("meshing {}", args.cloud.display()))?;
     tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
@@ -181,6 +169,25 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The pipeline's settings from the defaults and `--voxel-m`, `--max-residual-m` and
+/// `--target-mhe-m` (one cloud and `--objects` alike).
+fn mesh_config(args: &MeshArgs, viewpoint: Option<Vec3>) -> MeshConfig {
+    let mut config = MeshConfig {
+        viewpoint,
+        ..MeshConfig::default()
+    };
+    if let Some(v) = args.voxel_m {
+        config.voxel_size = Length::Metres(v);
+    }
+    if let Some(r) = args.max_residual_m {
+        config.max_residual = Length::Metres(r);
+    }
+    if let Some(target) = args.target_mhe_m {
+        config.max_residual = Length::Metres(residual_for_target_mhe_m(target));
+    }
+    config
 }
 
 /// Where normals face: `--viewpoint`, else the sensor position the file records (a PCD's
@@ -259,19 +266,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
         "segmented {}",
         args.cloud.display()
     );
-    let mut config = MeshConfig {
-        viewpoint: Some(viewpoint),
-        ..MeshConfig::default()
-    };
-    if let Some(v) = args.voxel_m {
-        config.voxel_size = Length::Metres(v);
-    }
-    if let Some(r) = args.max_residual_m {
-        config.max_residual = Length::Metres(r);
-    }
-    if let Some(target) = args.target_mhe_m {
-        config.max_residual = Length::Metres(residual_for_target_mhe_m(target));
-    }
+    let config = mesh_config(args, Some(viewpoint));
     let mut reports = Vec::new();
     for (k, indices) in segmentation.objects.iter().enumerate() {
         let id = k + 1;
