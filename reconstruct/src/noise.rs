@@ -19,6 +19,7 @@
 use glam::Vec3;
 
 use crate::moment_grid::MomentGrid;
+use crate::moments::{Plane, PointMoments};
 
 /// At most this many points go into the estimate (an even subsample of the cloud): the median
 /// of a few hundred boxes is as good as that of thousands, and the estimate stays cheap.
@@ -39,13 +40,7 @@ pub fn estimate_noise_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
     if !(cell_m.is_finite() && cell_m > 0.0) {
         return None;
     }
-    let stride = points.len().div_ceil(MAX_POINTS).max(1);
-    let sample: Vec<Vec3> = points
-        .iter()
-        .step_by(stride)
-        .copied()
-        .filter(|p| p.is_finite())
-        .collect();
+    let (sample, _) = finite_sample(points);
     let mut cell_m = cell_m;
     let mut estimate = median_spread_m(&sample, cell_m)?;
     for _ in 0..2 {
@@ -65,22 +60,11 @@ pub fn estimate_points_per_m2(points: &[Vec3], cell_m: f32) -> Option<f32> {
     if !(cell_m.is_finite() && cell_m > 0.0) {
         return None;
     }
-    let finite = points.iter().filter(|p| p.is_finite()).count();
-    let stride = finite.div_ceil(MAX_POINTS).max(1);
-    let sample: Vec<Vec3> = points
-        .iter()
-        .copied()
-        .filter(|p| p.is_finite())
-        .step_by(stride)
+    let (sample, finite) = finite_sample(points);
+    let counts = centred_boxes(&sample, cell_m, MIN_POINTS_FOR_A_PLANE)
+        .map(|(around, _)| around.count)
         .collect();
-    let mut counts: Vec<f64> = centred_boxes(&sample, cell_m, MIN_POINTS_FOR_A_PLANE)
-        .map(|(_, around)| around.count)
-        .collect();
-    if counts.len() < MIN_BOXES {
-        return None;
-    }
-    let middle = counts.len() / 2;
-    let median = *counts.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let median = median_of_boxes(counts)?;
     let box_side_m = 3.0 * f64::from(cell_m);
     let per_sample_point = finite as f64 / sample.len() as f64;
     Some((median * per_sample_point / (CROSS_SECTION * box_side_m * box_side_m)) as f32)
@@ -93,13 +77,36 @@ const CROSS_SECTION: f64 = 1.2;
 /// A plane needs three points.
 const MIN_POINTS_FOR_A_PLANE: f64 = 3.0;
 
+/// At most [`MAX_POINTS`] of the finite points, evenly through the cloud, and how many finite
+/// points there are.
+fn finite_sample(points: &[Vec3]) -> (Vec<Vec3>, usize) {
+    let finite = points.iter().filter(|p| p.is_finite()).count();
+    let stride = finite.div_ceil(MAX_POINTS).max(1);
+    let sample = points
+        .iter()
+        .copied()
+        .filter(|p| p.is_finite())
+        .step_by(stride)
+        .collect();
+    (sample, finite)
+}
+
+/// The median of a figure over boxes; `None` with fewer than [`MIN_BOXES`] boxes.
+fn median_of_boxes(mut values: Vec<f64>) -> Option<f64> {
+    if values.len() < MIN_BOXES {
+        return None;
+    }
+    let middle = values.len() / 2;
+    Some(*values.select_nth_unstable_by(middle, f64::total_cmp).1)
+}
+
 /// The boxes of 3 × 3 × 3 `cell_m` cells, with at least `min_points` points, whose points'
-/// plane crosses the middle cell: the middle cell and the moments of the box.
+/// plane crosses the middle cell: the moments of the box and that plane.
 fn centred_boxes(
     points: &[Vec3],
     cell_m: f32,
     min_points: f64,
-) -> impl Iterator<Item = (glam::IVec3, crate::moments::PointMoments)> {
+) -> impl Iterator<Item = (PointMoments, Plane)> {
     let mut grid = MomentGrid::new(cell_m);
     for &p in points {
         grid.add_point(p);
@@ -116,25 +123,20 @@ fn centred_boxes(
         if plane.normal.dot(centre - plane.point).abs() > cell_m / 2.0 {
             return None;
         }
-        Some((cell, around))
+        Some((around, plane))
     })
 }
 
 /// The median, over boxes of 3 × 3 × 3 cells whose points' plane crosses the middle cell, of
 /// the points' standard deviation along the plane's normal.
 fn median_spread_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
-    let mut spreads: Vec<f64> = centred_boxes(points, cell_m, MIN_POINTS_PER_BOX)
-        .filter_map(|(_, around)| {
-            let normal = around.plane()?.normal.as_dvec3();
-            let variance = normal.dot(around.covariance() * normal);
-            Some(variance.max(0.0).sqrt())
+    let spreads = centred_boxes(points, cell_m, MIN_POINTS_PER_BOX)
+        .map(|(around, plane)| {
+            let normal = plane.normal.as_dvec3();
+            normal.dot(around.covariance() * normal).max(0.0).sqrt()
         })
         .collect();
-    if spreads.len() < MIN_BOXES {
-        return None;
-    }
-    let middle = spreads.len() / 2;
-    Some(*spreads.select_nth_unstable_by(middle, f64::total_cmp).1 as f32)
+    median_of_boxes(spreads).map(|spread| spread as f32)
 }
 
 #[cfg(test)]
