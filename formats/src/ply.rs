@@ -87,8 +87,16 @@ impl PropertyAccess for VertexRecord {
 struct PositionRecord([f32; 3]);
 
 impl PositionRecord {
+    /// The axis a position property stands for (a normal's is ignored here).
+    fn axis(property: &str) -> Option<usize> {
+        match VertexRecord::axis(property)? {
+            (false, axis) => Some(axis),
+            (true, _) => None,
+        }
+    }
+
     fn set(&mut self, property: &str, value: f32) -> PropertyAccessResult {
-        match POSITION_NAMES.iter().position(|&n| n == property) {
+        match Self::axis(property) {
             Some(axis) => {
                 self.0[axis] = value;
                 PropertyAccessResult::Set
@@ -112,8 +120,7 @@ impl PropertyAccess for PositionRecord {
     }
 
     fn get_float(&self, property: &str) -> Option<f32> {
-        let axis = POSITION_NAMES.iter().position(|&n| n == property)?;
-        Some(self.0[axis])
+        Some(self.0[Self::axis(property)?])
     }
 }
 
