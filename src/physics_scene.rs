@@ -1,4 +1,4 @@
-//! A physics scene of what a subscriber holds (`tacmesh subscribe --out DIR --mjcf`): each
+//! A physics scene of what a subscriber holds (`tacmesh subscribe --out DIR --mjcf --sdf`): each
 //! object a moving body with convex collision parts and mass properties, each support plane a
 //! plane, gravity towards the largest support. An object whose body does not stand on a
 //! support by itself (it touches it in fewer than three points, or its centre of mass is not
@@ -18,8 +18,8 @@
 use std::collections::HashMap;
 
 use glam::{Affine3A, Vec3};
-use tacmesh_physics::mjcf::{Motion, Scene as MjcfScene, SceneBody, ScenePlane, WorldFromBody};
 use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
+use tacmesh_physics::scene::{Motion, Scene as SimScene, SceneBody, ScenePlane, WorldFromBody};
 use tacmesh_physics::{convex_parts, rests_on, ConvexConfig, MassProperties, WorldSupport};
 use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
@@ -46,7 +46,7 @@ pub struct PhysicsScene {
 
 /// What [`PhysicsScene::update`] made of the scene.
 pub struct PhysicsUpdate {
-    pub scene: MjcfScene,
+    pub scene: SimScene,
     /// Objects whose collision parts were (re)computed in this update.
     pub decomposed: usize,
     /// Objects whose collision parts are their published Body's.
@@ -157,7 +157,7 @@ impl PhysicsScene {
             }
         }
         PhysicsUpdate {
-            scene: MjcfScene {
+            scene: SimScene {
                 gravity_m_s2: -GRAVITY_M_S2 * up,
                 supports: supports
                     .iter()

@@ -1,18 +1,20 @@
 //! Writes a demo MuJoCo scene: a 10 cm cube resting on a support plane and a 5 cm sphere
 //! dropped beside it, each with its convex parts and mass properties, and a static box.
 //!
-//! `cargo run -p tacmesh-physics --example write_mjcf -- DIR [--up z|y]`
+//! `cargo run -p tacmesh-physics --example write_mjcf -- DIR [--up z|y] [--sdf]`
 //!
 //! `--up y` builds the same scene in a world whose up is +Y (gravity along -Y, the plane's
 //! normal +Y), as a camera's frame might be. `python/tests/test_mjcf.py` loads and steps it.
+//! `--sdf` writes the same scene as an SDF world (DIR/scene.sdf) instead, which
+//! `python/tests/test_sdf.py` loads in PyBullet.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use glam::{Quat, Vec3};
 use tacmesh_physics::{
-    convex_parts, write_mjcf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Scene, SceneBody,
-    ScenePlane, TriMesh, WorldFromBody,
+    convex_parts, write_mjcf, write_sdf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Scene,
+    SceneBody, ScenePlane, SdfConfig, TriMesh, WorldFromBody,
 };
 use tacmesh_sim::{cube, uv_sphere};
 
@@ -74,20 +76,28 @@ fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
 }
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let sdf = args.iter().any(|a| a == "--sdf");
+    args.retain(|a| a != "--sdf");
     let (dir, up) = match args.as_slice() {
         [dir] => (PathBuf::from(dir), Vec3::Z),
         [dir, flag, axis] if flag == "--up" && axis == "z" => (PathBuf::from(dir), Vec3::Z),
         [dir, flag, axis] if flag == "--up" && axis == "y" => (PathBuf::from(dir), Vec3::Y),
         _ => {
-            eprintln!("usage: write_mjcf DIR [--up z|y]");
+            eprintln!("usage: write_mjcf DIR [--up z|y] [--sdf]");
             return ExitCode::from(2);
         }
     };
-    let written = demo_scene(up).and_then(|scene| write_mjcf(&dir, &scene, &MjcfConfig::default()));
+    let written = demo_scene(up).and_then(|scene| {
+        if sdf {
+            write_sdf(&dir, &scene, &SdfConfig::default())
+        } else {
+            write_mjcf(&dir, &scene, &MjcfConfig::default())
+        }
+    });
     match written {
         Ok(written) => {
-            println!("{}", written.scene_xml.display());
+            println!("{}", written.scene_file.display());
             ExitCode::SUCCESS
         }
         Err(e) => {

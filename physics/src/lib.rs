@@ -1,7 +1,7 @@
 //! What a physics engine needs from a mesh, beyond its distance to the truth: a closed,
 //! outward-facing surface for a solid, a closed collision proxy for a one-view shell, and
-//! convex parts with mass properties for a body that can move, and a MuJoCo scene (MJCF) of
-//! them all.
+//! convex parts with mass properties for a body that can move, and scenes of them all for
+//! MuJoCo (MJCF) and for Gazebo and PyBullet (SDF).
 
 pub mod convex;
 pub mod error;
@@ -9,6 +9,8 @@ pub mod mass;
 pub mod mjcf;
 pub mod orientation;
 pub mod proxy;
+pub mod scene;
+pub mod sdf;
 pub mod stl;
 pub mod support;
 
@@ -17,10 +19,9 @@ pub use convex::{
 };
 pub use error::PhysicsError;
 pub use mass::MassProperties;
-pub use mjcf::{
-    mjcf_document, write_mjcf, MjcfConfig, MjcfDocument, Motion, Scene, SceneBody, ScenePlane,
-    WorldFromBody, WrittenScene,
-};
+pub use mjcf::{mjcf_document, write_mjcf, MjcfConfig, MjcfDocument};
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
+pub use scene::{Motion, Scene, SceneBody, ScenePlane, WorldFromBody, WrittenScene};
+pub use sdf::{sdf_document, write_sdf, SdfConfig, SdfDocument};
 pub use support::{rests_on, support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;

@@ -25,80 +25,18 @@
 //! Entry points: [`write_mjcf`] (files), [`mjcf_document`] (the XML and the meshes it names,
 //! without touching the disk).
 
-use std::collections::HashSet;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::error::PhysicsError;
-use crate::mass::MassProperties;
-use crate::stl::write_binary_stl;
-
-/// A rigid transform from a body's frame to the world: `p_in_world = rotation * p_in_body +
-/// translation_m`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WorldFromBody {
-    /// Unit quaternion (glam stores x, y, z, w; MJCF gets w x y z).
-    pub rotation: Quat,
-    /// Translation in metres.
-    pub translation_m: Vec3,
-}
-
-impl WorldFromBody {
-    pub const IDENTITY: WorldFromBody = WorldFromBody {
-        rotation: Quat::IDENTITY,
-        translation_m: Vec3::ZERO,
-    };
-}
-
-/// Whether the simulation may move a body.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Motion {
-    /// Welded to the world (a table, a wall): no joint, no mass.
-    Static,
-    /// Free to move under gravity and contact: a free joint and an inertia.
-    Dynamic,
-}
-
-/// One object of the scene; every mesh in the body's own frame, metres.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SceneBody {
-    /// A name or id; sanitised and made unique in the file.
-    pub name: String,
-    pub world_from_body: WorldFromBody,
-    /// What is drawn; never collides. May be empty (no visual geom).
-    pub visual: TriMesh,
-    /// Closed convex parts, what collides (`crate::convex_parts`). A dynamic body needs one.
-    pub convex_parts: Vec<TriMesh>,
-    /// Unit-density mass properties in the body's frame (of the mesh, or of its parts).
-    pub mass: MassProperties,
-    pub motion: Motion,
-}
-
-/// An infinite support plane (a table top, the floor) that bodies rest on.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScenePlane {
-    /// A name or id; sanitised and made unique in the file.
-    pub name: String,
-    /// A point on the plane, world frame, metres.
-    pub point_in_world: Vec3,
-    /// The side bodies rest on, world frame (normalised here; must not be zero).
-    pub normal_in_world: Vec3,
-    /// Half the side of the square drawn, metres (0: drawn infinite). Collisions are always
-    /// with the infinite plane.
-    pub drawn_half_size_m: f32,
-}
-
-/// What a scene file holds.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Scene {
-    /// Gravity in the world frame, m/s² (for example `-9.81 * up`).
-    pub gravity_m_s2: Vec3,
-    pub supports: Vec<ScenePlane>,
-    pub bodies: Vec<SceneBody>,
-}
+use crate::scene::{check_scene, number, numbers, sanitise, write_scene_files, UniqueNames};
+// The scene's types, here too: the MJCF writer's callers name them through this module.
+pub use crate::scene::{
+    Motion, Scene, SceneBody, ScenePlane, WorldFromBody, WrittenScene, MESH_FOLDER,
+};
 
 /// How to write a scene.
 #[derive(Debug, Clone, PartialEq)]
@@ -138,79 +76,6 @@ pub struct MjcfDocument {
     pub meshes: Vec<(String, TriMesh)>,
 }
 
-/// What [`write_mjcf`] wrote.
-#[derive(Debug, Clone, PartialEq)]
-pub struct WrittenScene {
-    pub scene_xml: PathBuf,
-    pub mesh_files: Vec<PathBuf>,
-}
-
-/// The folder beside `scene.xml` that holds the meshes.
-pub const MESH_FOLDER: &str = "meshes";
-
-// ---- names ----------------------------------------------------------------------------------
-
-/// Keeps `[A-Za-z0-9_.-]`, replaces anything else with `_`; never empty, never starting with
-/// a dot (a hidden file).
-fn sanitise(name: &str) -> String {
-    let mut out: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    if out.is_empty() || out.starts_with('.') {
-        out.insert(0, '_');
-    }
-    out
-}
-
-/// Hands out sanitised names, each once (`box`, `box_2`, `box_3`…).
-#[derive(Default)]
-struct UniqueNames {
-    taken: HashSet<String>,
-}
-
-impl UniqueNames {
-    fn claim(&mut self, wanted: &str) -> String {
-        let base = sanitise(wanted);
-        let mut name = base.clone();
-        let mut n = 2;
-        while !self.taken.insert(name.clone()) {
-            name = format!("{base}_{n}");
-            n += 1;
-        }
-        name
-    }
-}
-
-// ---- numbers --------------------------------------------------------------------------------
-
-/// One number in Rust's shortest round-trip form, with an exponent when very small or large
-/// (MuJoCo reads numbers with `strtod`), and no negative zero.
-fn number(v: f32) -> String {
-    let v = v + 0.0; // -0 + 0 = +0
-    let magnitude = v.abs();
-    if v == 0.0 || (1e-4..1e7).contains(&magnitude) {
-        format!("{v}")
-    } else {
-        format!("{v:e}")
-    }
-}
-
-/// Space-separated numbers.
-fn numbers(values: &[f32]) -> String {
-    values
-        .iter()
-        .map(|&v| number(v))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
 fn mjcf_quat(q: Quat) -> String {
     let q = q.normalize();
     numbers(&[q.w, q.x, q.y, q.z])
@@ -218,13 +83,7 @@ fn mjcf_quat(q: Quat) -> String {
 
 // ---- checks ---------------------------------------------------------------------------------
 
-fn check_scene(scene: &Scene, config: &MjcfConfig) -> Result<(), PhysicsError> {
-    let density_ok = config.density_kg_m3.is_finite() && config.density_kg_m3 > 0.0;
-    if !density_ok {
-        return Err(PhysicsError::BadDensity {
-            density_kg_m3: config.density_kg_m3,
-        });
-    }
+fn check_config(scene: &Scene, config: &MjcfConfig) -> Result<(), PhysicsError> {
     let step_ok = config.timestep_s.is_finite() && config.timestep_s > 0.0;
     if !step_ok {
         return Err(PhysicsError::InvalidScene(format!(
@@ -232,49 +91,14 @@ fn check_scene(scene: &Scene, config: &MjcfConfig) -> Result<(), PhysicsError> {
             config.timestep_s
         )));
     }
-    for support in &scene.supports {
-        let normal_ok = support.normal_in_world.length() > 1e-6;
-        if !normal_ok || !support.point_in_world.is_finite() {
-            return Err(PhysicsError::InvalidScene(format!(
-                "support {:?} needs a finite point and a non-zero normal",
-                support.name
-            )));
-        }
-    }
-    for body in &scene.bodies {
-        let pose_ok = body.world_from_body.translation_m.is_finite()
-            && body.world_from_body.rotation.is_finite()
-            && body.world_from_body.rotation.length() > 1e-6;
-        if !pose_ok {
-            return Err(PhysicsError::InvalidScene(format!(
-                "body {:?} has no finite pose",
-                body.name
-            )));
-        }
-        if body.motion == Motion::Dynamic {
-            if body.convex_parts.is_empty() {
-                return Err(PhysicsError::InvalidScene(format!(
-                    "dynamic body {:?} has no convex parts to collide with: it would fall \
-                     through its support",
-                    body.name
-                )));
-            }
-            let mass_ok = body.mass.volume_m3.is_finite() && body.mass.volume_m3 > 0.0;
-            if !mass_ok {
-                return Err(PhysicsError::NoVolume {
-                    volume_m3: f64::from(body.mass.volume_m3),
-                });
-            }
-        }
-    }
-    Ok(())
+    check_scene(scene, config.density_kg_m3)
 }
 
 // ---- document -------------------------------------------------------------------------------
 
 /// The MJCF text of `scene` and the meshes it refers to, without writing anything.
 pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument, PhysicsError> {
-    check_scene(scene, config)?;
+    check_config(scene, config)?;
     let mut names = UniqueNames::default();
     let mut meshes: Vec<(String, TriMesh)> = Vec::new();
     let mut assets = String::new();
@@ -396,20 +220,6 @@ fn light_direction(gravity_m_s2: Vec3) -> Vec3 {
 
 // ---- files ----------------------------------------------------------------------------------
 
-/// Writes `bytes` to `path` whole: into a temporary file beside it, then renamed over it, so
-/// a reader never sees half a file.
-fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), PhysicsError> {
-    let error = |source| PhysicsError::Write {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut temporary = path.as_os_str().to_owned();
-    temporary.push(".part");
-    let temporary = PathBuf::from(temporary);
-    std::fs::write(&temporary, bytes).map_err(error)?;
-    std::fs::rename(&temporary, path).map_err(error)
-}
-
 /// Writes `dir/scene.xml` and `dir/meshes/*.stl` for `scene` (creating the folders), meshes
 /// first, so a reader that sees the new `scene.xml` finds every mesh it names.
 pub fn write_mjcf(
@@ -418,28 +228,7 @@ pub fn write_mjcf(
     config: &MjcfConfig,
 ) -> Result<WrittenScene, PhysicsError> {
     let document = mjcf_document(scene, config)?;
-    let mesh_dir = dir.join(MESH_FOLDER);
-    std::fs::create_dir_all(&mesh_dir).map_err(|source| PhysicsError::Write {
-        path: mesh_dir.clone(),
-        source,
-    })?;
-    let mut mesh_files = Vec::with_capacity(document.meshes.len());
-    for (relative, mesh) in &document.meshes {
-        let path = dir.join(relative);
-        let mut bytes = Vec::new();
-        write_binary_stl(&mut bytes, mesh).map_err(|source| PhysicsError::Write {
-            path: path.clone(),
-            source,
-        })?;
-        write_whole(&path, &bytes)?;
-        mesh_files.push(path);
-    }
-    let scene_xml = dir.join("scene.xml");
-    write_whole(&scene_xml, document.xml.as_bytes())?;
-    Ok(WrittenScene {
-        scene_xml,
-        mesh_files,
-    })
+    write_scene_files(dir, "scene.xml", &document.xml, &document.meshes)
 }
 
 #[cfg(test)]
@@ -484,7 +273,7 @@ mod tests {
     fn two_body_scene_is_written_with_its_meshes() {
         let dir = tempfile::tempdir().unwrap();
         let written = write_mjcf(dir.path(), &two_body_scene(), &MjcfConfig::default()).unwrap();
-        let xml = std::fs::read_to_string(&written.scene_xml).unwrap();
+        let xml = std::fs::read_to_string(&written.scene_file).unwrap();
         assert!(xml.starts_with("<mujoco model=\"tacmesh\">"));
         assert!(xml.trim_end().ends_with("</mujoco>"));
         assert_eq!(xml.matches("<body ").count(), 2);
@@ -539,16 +328,6 @@ mod tests {
         let xml = mjcf_document(&scene, &MjcfConfig::default()).unwrap().xml;
         // A quarter turn about -X takes +Z to +Y: w = cos 45°, x = -sin 45°.
         assert!(xml.contains(r#"quat="0.7071068 -0.7071068 0 0""#), "{xml}");
-    }
-
-    #[test]
-    fn names_are_sanitised_and_unique() {
-        let mut names = UniqueNames::default();
-        assert_eq!(names.claim("cup"), "cup");
-        assert_eq!(names.claim("cup"), "cup_2");
-        assert_eq!(names.claim("a\"b<c>&"), "a_b_c__");
-        assert_eq!(names.claim(""), "_");
-        assert_eq!(names.claim("../x"), "_.._x");
     }
 
     #[test]

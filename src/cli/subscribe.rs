@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::default_socket_path;
 use tacmesh::daemon::planes::FIRST_PLANE_ID;
-use tacmesh::physics::mjcf::{write_mjcf, MjcfConfig};
+use tacmesh::physics::{write_mjcf, write_sdf, MjcfConfig, SdfConfig};
 use tacmesh::physics_scene::PhysicsScene;
 use tacmesh::protocol::{Encoding, Kinds, Message, Pose, Scene, SceneChange, Shape, Subscribe};
 use tacmesh::source::monotonic_now;
@@ -38,6 +38,12 @@ pub struct SubscribeArgs {
     /// body or removal and at most once a second for moves
     #[arg(long, requires = "out")]
     mjcf: bool,
+    /// With --out: also keep the same scene as an SDFormat world, DIR/scene.sdf (Gazebo loads
+    /// it; PyBullet with loadSDF), its meshes in DIR/meshes beside the MuJoCo scene's: each
+    /// object a model with the same collision parts and mass, static where --mjcf's is, each
+    /// support plane a static plane, the same gravity. Kept as --mjcf keeps its scene
+    #[arg(long, requires = "out")]
+    sdf: bool,
     /// Exit after this many updates (shapes and poses; bodies are not counted)
     #[arg(long, value_name = "N")]
     count: Option<u64>,
@@ -198,7 +204,9 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     writeln!(out, "connected to {from}")?;
     let mut updates = 0u64;
     let mut scene = Scene::new();
-    let mut mjcf = args.mjcf.then(|| MjcfOutput {
+    let mut physics_files = (args.mjcf || args.sdf).then(|| PhysicsFiles {
+        mjcf: args.mjcf,
+        sdf: args.sdf,
         physics: PhysicsScene::new(),
         written_at: None,
         warned: Default::default(),
@@ -306,7 +314,7 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
         }
-        if let (Some(dir), Some(mjcf)) = (&args.out, mjcf.as_mut()) {
+        if let (Some(dir), Some(files)) = (&args.out, physics_files.as_mut()) {
             let reshaped = matches!(
                 change,
                 SceneChange::SnapshotDone
@@ -316,15 +324,19 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
                     | SceneChange::Removed(_)
             );
             let moved = matches!(change, SceneChange::Moved(_));
-            if scene.snapshot_done() && (reshaped || (moved && mjcf.due())) {
-                mjcf.write(dir, &scene)?;
+            if scene.snapshot_done() && (reshaped || (moved && files.due())) {
+                files.write(dir, &scene)?;
             }
         }
     }
 }
 
-/// The MuJoCo scene `--mjcf` keeps in the output folder.
-struct MjcfOutput {
+/// The physics scenes `--mjcf` and `--sdf` keep in the output folder.
+struct PhysicsFiles {
+    /// Write DIR/scene.xml.
+    mjcf: bool,
+    /// Write DIR/scene.sdf.
+    sdf: bool,
     physics: PhysicsScene,
     written_at: Option<Instant>,
     /// Objects already warned about, so a shape that cannot collide is said once.
@@ -333,7 +345,7 @@ struct MjcfOutput {
     held_still: std::collections::HashSet<u64>,
 }
 
-impl MjcfOutput {
+impl PhysicsFiles {
     /// Moves alone rewrite the scene at most this often.
     const MOVE_INTERVAL: Duration = Duration::from_secs(1);
 
@@ -346,21 +358,28 @@ impl MjcfOutput {
         let update = self.physics.update(scene);
         for (id, why) in &update.left_out {
             if self.warned.insert(*id) {
-                tracing::warn!("object {id} is left out of the MuJoCo scene: {why}");
+                tracing::warn!("object {id} is left out of the physics scene: {why}");
             }
         }
         for (id, why) in &update.held_still {
             if self.held_still.insert(*id) {
-                tracing::info!("object {id} is static in the MuJoCo scene: {why}");
+                tracing::info!("object {id} is static in the physics scene: {why}");
             }
         }
-        let written = write_mjcf(dir, &update.scene, &MjcfConfig::default())
-            .with_context(|| format!("writing the MuJoCo scene in {}", dir.display()))?;
+        let mut keep: std::collections::HashSet<PathBuf> = Default::default();
+        if self.mjcf {
+            let written = write_mjcf(dir, &update.scene, &MjcfConfig::default())
+                .with_context(|| format!("writing the MuJoCo scene in {}", dir.display()))?;
+            keep.extend(written.mesh_files);
+        }
+        if self.sdf {
+            let written = write_sdf(dir, &update.scene, &SdfConfig::default())
+                .with_context(|| format!("writing the SDF world in {}", dir.display()))?;
+            keep.extend(written.mesh_files);
+        }
         self.written_at = Some(Instant::now());
-        // Meshes of objects gone, or parts an object no longer has: the scene names none.
-        let keep: std::collections::HashSet<&Path> =
-            written.mesh_files.iter().map(PathBuf::as_path).collect();
-        let mesh_dir = dir.join(tacmesh::physics::mjcf::MESH_FOLDER);
+        // Meshes of objects gone, or parts an object no longer has: no scene names them.
+        let mesh_dir = dir.join(tacmesh::physics::scene::MESH_FOLDER);
         for entry in std::fs::read_dir(&mesh_dir)
             .with_context(|| format!("listing {}", mesh_dir.display()))?
             .flatten()
