@@ -1,5 +1,5 @@
 //! The support planes of a scene (tables, floors, published as fans of triangles in the world)
-//! and which one an object stands on, in the object's frame: what [`collision_proxy`]
+//! and which one an object stands on, in the object's frame: what [`collision_proxy`](crate::collision_proxy)
 //! (crate::collision_proxy) closes a one-view shell towards.
 
 use glam::{Affine3A, Vec3};
