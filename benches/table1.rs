@@ -5,9 +5,14 @@
 //!
 //! `cargo bench --bench table1` (all noise levels, 5 seeds, and the noise × points sweep with
 //! 3 seeds) prints Markdown for BENCHMARKS.md and writes `target/table1.json`.
-//! `-- --seeds 1 --noise-mm 20 --sweep-seeds 0` for a quick look.
+//! `-- --seeds 1 --noise-mm 20 --sweep-seeds 0 --peer-seeds 0` for a quick look. The peer run
+//! (Open3D's Poisson and quadric decimation on the same clouds, `table1/peer.rs`) needs a
+//! Python with `open3d` named by `TACMESH_PEER_PYTHON` or `--peer-python PATH`.
 
 use std::time::Instant;
+
+#[path = "table1/peer.rs"]
+mod peer;
 
 use tacmesh::pipeline::{
     mesh_cloud, mesh_cloud_with_dense, residual_for_target_mhe_m, Length, MeshConfig, MeshReport,
@@ -40,6 +45,10 @@ struct Options {
     points: usize,
     /// Seeds per cell of the noise × points sweep; 0 skips it.
     sweep_seeds: u64,
+    /// Seeds of the peer run (Open3D on the same clouds); 0 skips it.
+    peer_seeds: u64,
+    /// The Python the peer runs under.
+    peer_python: String,
 }
 
 fn parse_options() -> Options {
@@ -48,8 +57,11 @@ fn parse_options() -> Options {
         noise_mm: vec![0.0, 10.0, 20.0, 30.0, 40.0],
         points: 50_000,
         sweep_seeds: 3,
+        peer_seeds: 3,
+        peer_python: String::new(),
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
+    options.peer_python = peer::python_from(&args);
     let mut i = 0;
     while i < args.len() {
         let value = args.get(i + 1).cloned().unwrap_or_default();
@@ -57,6 +69,8 @@ fn parse_options() -> Options {
             "--seeds" => options.seeds = value.parse().expect("--seeds N"),
             "--points" => options.points = value.parse().expect("--points N"),
             "--sweep-seeds" => options.sweep_seeds = value.parse().expect("--sweep-seeds N"),
+            "--peer-seeds" => options.peer_seeds = value.parse().expect("--peer-seeds N"),
+            "--peer-python" => {} // read by peer::python_from
             "--noise-mm" => {
                 options.noise_mm = value
                     .split(',')
@@ -506,6 +520,14 @@ fn main() {
     }
 
     error_target_mode(options.seeds, options.points);
+    if options.peer_seeds > 0 {
+        peer::peer_run(
+            &options.peer_python,
+            options.peer_seeds,
+            options.points,
+            &one_thread,
+        );
+    }
 
     let json = serde_json::to_string_pretty(&runs).expect("runs serialise");
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/target/table1.json");
