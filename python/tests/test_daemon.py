@@ -191,8 +191,13 @@ def test_the_moving_object_arrives_as_poses_of_the_same_shape(daemon: Daemon) ->
     # The cone slides 0.6 m back and forth at 0.1 m/s: over 6 s its poses take it at least
     # 0.3 m (less a margin for the tracker's lag), and at most one object moves like that.
     spans = {i: float(np.linalg.norm(np.ptp(np.array(c), axis=0))) for i, c in centres.items()}
-    assert sorted(spans.values())[-1] > 0.2, spans
-    assert sorted(spans.values())[-2] < 0.05, spans
+    mover = max(spans, key=lambda i: spans[i])
+    assert spans[mover] > 0.2, spans
+    # The others stand still: their poses of one shape stay within 5 cm. (Not their meshes'
+    # centres across shapes: a one-view object's new shape, fused from more frames, can shift
+    # the mean of its vertices by centimetres without any move; CI saw 5.8 cm once.)
+    still = {key: t for key, t in travel.items() if key[0] != mover}
+    assert all(t < 0.05 for t in still.values()), (still, spans)
 
 
 def test_times_and_versions_never_go_backwards_per_object(daemon: Daemon) -> None:
