@@ -11,7 +11,6 @@ when it is not named or mujoco is not installed.
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from example_scene import write_example_scene
 from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
 
 mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not installed")
@@ -27,33 +27,6 @@ mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not install
 STEPS = 200  # 0.4 s at the scene's 2 ms step
 CUBE_HALF_M = 0.05
 SPHERE_RADIUS_M = 0.05
-
-
-def example_binary() -> Path:
-    named = os.environ.get("TACMESH_MJCF_EXAMPLE")
-    if not named:
-        pytest.skip(
-            "TACMESH_MJCF_EXAMPLE names no build of the write_mjcf example "
-            "(cargo build -p tacmesh-physics --example write_mjcf)"
-        )
-    binary = Path(named)
-    if not binary.is_file():
-        pytest.skip(f"TACMESH_MJCF_EXAMPLE={named} is not a file")
-    return binary
-
-
-def write_scene(folder: Path, up: str) -> Path:
-    done = subprocess.run(
-        [str(example_binary()), str(folder), "--up", up],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    scene = Path(done.stdout.strip())
-    assert scene == folder / "scene.xml"
-    return scene
 
 
 def body_position(model: Any, data: Any, name: str) -> npt.NDArray[np.float64]:
@@ -70,7 +43,7 @@ def body_position(model: Any, data: Any, name: str) -> npt.NDArray[np.float64]:
 def test_cube_rests_and_sphere_lands(
     tmp_path: Path, up_axis: str, up: npt.NDArray[np.float64]
 ) -> None:
-    model = mujoco.MjModel.from_xml_path(str(write_scene(tmp_path, up_axis)))
+    model = mujoco.MjModel.from_xml_path(str(write_example_scene(tmp_path, up_axis)))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     cube_start = body_position(model, data, "cube")

@@ -10,7 +10,7 @@ Gazebo's `collide_bitmask`, so the tests keep the bodies from colliding with eac
 file says Gazebo should, with `setCollisionFilterPair`.
 
 The example scene comes from `physics/examples/write_mjcf.rs --sdf`, named by
-TACMESH_MJCF_EXAMPLE (see test_mjcf.py). Skipped, with the reason, when it is not named or
+TACMESH_MJCF_EXAMPLE (see example_scene.py). Skipped, with the reason, when it is not named or
 pybullet is not installed.
 """
 
@@ -28,8 +28,8 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from example_scene import write_example_scene
 from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
-from test_mjcf import example_binary
 
 pybullet = pytest.importorskip("pybullet", reason="the pybullet package is not installed")
 
@@ -79,20 +79,6 @@ def step(client: int, seconds: float) -> None:
         pybullet.stepSimulation(physicsClientId=client)
 
 
-def write_example_world(folder: Path, up: str) -> Path:
-    done = subprocess.run(
-        [str(example_binary()), str(folder), "--up", up, "--sdf"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    world = Path(done.stdout.strip())
-    assert world == folder / "scene.sdf"
-    return world
-
-
 @pytest.mark.parametrize(
     ("up_axis", "up"),
     [("z", np.array([0.0, 0.0, 1.0])), ("y", np.array([0.0, 1.0, 0.0]))],
@@ -100,7 +86,7 @@ def write_example_world(folder: Path, up: str) -> Path:
 def test_cube_rests_and_sphere_lands(
     tmp_path: Path, client: int, up_axis: str, up: npt.NDArray[np.float64]
 ) -> None:
-    bodies = load_world(write_example_world(tmp_path, up_axis), client)
+    bodies = load_world(write_example_scene(tmp_path, up_axis, sdf=True), client)
     assert sorted(bodies) == ["cube", "sphere", "table", "wall"]
     # 0.001 m³ at the writer's default 500 kg/m³; static models have no mass (fixed).
     assert mass(bodies["cube"], client) == pytest.approx(0.5, rel=1e-5)
