@@ -482,9 +482,10 @@ impl<'m> Simplifier<'m> {
             v
         }
         for t in &self.tris {
-            let r0 = root(&mut parent, t[0]);
             for &v in &t[1..] {
-                let r = root(&mut parent, v);
+                // Both roots afresh for every pair: the first union may have hung `t[0]`'s
+                // root under another, and linking a non-root would cut its tree off.
+                let (r0, r) = (root(&mut parent, t[0]), root(&mut parent, v));
                 let (lo, hi) = (r0.min(r), r0.max(r));
                 parent[hi as usize] = lo;
             }

@@ -442,3 +442,39 @@ fn random_soups_never_panic_and_keep_the_bound() {
         }
     }
 }
+
+#[test]
+fn components_are_found_whatever_the_order_of_indices() {
+    // A 2×2 grid of the unit square, its vertices and corners shuffled: the union of a
+    // triangle's corners used to link a root that the first union had already hung under
+    // another, which cut vertex 1 off its component and left it no faces on record (an overflow
+    // in debug builds, a component simplified below its floor in release; a real scan's second
+    // pass hit it).
+    let at = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+    let vertices = vec![
+        at(0.5, 0.0),
+        at(0.0, 1.0),
+        at(1.0, 0.0),
+        at(0.5, 1.0),
+        at(1.0, 1.0),
+        at(0.5, 0.5),
+        at(0.0, 0.5),
+        at(0.0, 0.0),
+        at(1.0, 0.5),
+    ];
+    let triangles = vec![
+        [7, 0, 5],
+        [5, 6, 7],
+        [8, 0, 2],
+        [5, 0, 8],
+        [6, 5, 3],
+        [1, 6, 3],
+        [5, 8, 4],
+        [4, 3, 5],
+    ];
+    let mesh = TriMesh::new(vertices, triangles);
+    let (out, _) = run(&mesh, f32::INFINITY);
+    assert!(!out.triangles.is_empty());
+    assert_manifold(&out);
+    assert!((out.area() - 1.0).abs() < 1e-4, "area {}", out.area());
+}
