@@ -70,15 +70,22 @@ impl Default for MeshConfig {
 }
 
 /// The voxel for noise of standard deviation σ (as [`estimate_noise_m`] finds it) is this many
-/// σ, when that is more than the relative default. Measured on the six shapes at 40,000 points:
-/// at 40 mm noise (estimated 32–52 mm) voxels of 30 mm meet Table 1's error with fewer faces
-/// than Table 1 where the default 20 mm leaves 150–1,950 faces; at 20 mm noise (estimated
-/// 16–19 mm) the default stays. The larger of this and the spacing's voxel is taken.
-pub const NOISE_VOXEL_RATIO: f32 = 0.9;
+/// σ, when that is more than the relative default. Measured on the six shapes at 40,000 points
+/// (`cargo bench --bench table1`, BENCHMARKS.md): at 20 mm noise (estimated 16–19 mm) 1.4 σ
+/// gives 23–27 mm voxels and fewer faces than the default 20 mm on every shape (cone 58 → 38,
+/// monkey 172 → 126) at 0.9–1.2× the error, still 0.25–0.4× Table 1's, and 40 % less time;
+/// 0.9 σ left the default in place there. At 10 mm and below the default stays. The larger of
+/// this and the spacing's voxel is taken.
+pub const NOISE_VOXEL_RATIO: f32 = 1.4;
 
-/// The noise never grows the voxel beyond this multiple of the relative default: a voxel of
-/// 1/25 of the object opens the torus's tube (its smoothing reaches across it).
-pub const MAX_NOISE_VOXEL_GROWTH: f32 = 1.5;
+/// The noise never grows the voxel beyond this multiple of the relative default (1/50 of the
+/// extent): 1.4 keeps the voxel near the residual bound (1/40 of the extent). Measured at 30
+/// and 40 mm noise, seeds 101–103, voxel at 1.3, 1.4 and 1.5 times the default: at 1.5 the
+/// marching-cubes cube's edges round off by more than the bound and cost chamfers (30 mm
+/// noise: 60–76 faces, 3.6–4.7 mm, against 36–38 faces and 1.7–2.6 mm at 1.4); at 1.3 the
+/// noise is left as bumps (cone at 40 mm: 102–120 faces against 76–88). A voxel of 1/25 of the
+/// object opens the torus's tube (its smoothing reaches across it).
+pub const MAX_NOISE_VOXEL_GROWTH: f32 = 1.4;
 
 /// The voxel for points spaced `s` apart on the surface (`s²` square metres per point, see
 /// [`estimate_points_per_m2`]) is at least this many `s`. Measured on the six shapes at 5,000
