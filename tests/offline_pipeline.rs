@@ -366,6 +366,50 @@ fn high_noise_and_sparse_clouds_close_with_few_faces() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// Issue 14's planes and sharp features, on seeds the tuning did not see (20 mm noise, 40,000
+/// points): the cube comes out with at most 16 faces (its true 12 plus a corner's worth) and
+/// the cylinder with at most 64, both closed and within Table 1's error. Before the second
+/// simplification pass over the fitted mesh the cube kept 28-38 faces: chamfers at its corners
+/// that marching cubes' rounding had needed.
+#[test]
+fn cube_and_cylinder_keep_their_planes_and_edges_with_few_faces() {
+    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
+    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
+    let mut failures = Vec::new();
+    for (shape, faces_bound, mhe_bound) in
+        [(Shape::Cube, 16, 0.00488), (Shape::Cylinder, 64, 0.00748)]
+    {
+        let truth = shape.mesh();
+        for seed in [31, 32] {
+            let cloud = sample_cloud(
+                &truth,
+                &SampleConfig {
+                    points: 40_000,
+                    noise_sigma_m: 0.02,
+                    seed,
+                },
+            )
+            .expect("samples");
+            let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
+            let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
+                .expect("measures")
+                .mhe_m;
+            let line = format!(
+                "{} seed {seed}: {} faces ({} after the first pass), closed {}, MHE {mhe:.5}",
+                shape.name(),
+                report.faces,
+                report.first_pass_faces,
+                report.closed,
+            );
+            println!("{line}");
+            if !(report.closed && report.faces <= faces_bound && mhe <= mhe_bound) {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
 /// The error-target mode aims at a mean error with as few faces as that allows: at Table 1's
 /// MHE the sphere needs half Table 1's faces (116 / 2), and its error stays under the target
 /// (an unseen seed). It takes no residual bound beside it.

@@ -293,7 +293,8 @@ struct Simplifier<'m> {
     component_faces: Vec<u32>,
     component_closed: Vec<bool>,
 
-    /// Support points by input vertex id (unused entries have `face == NONE`).
+    /// Support points: first by input vertex id (unused entries have `face == NONE`), then the
+    /// caller's extra points.
     support: Vec<Support>,
     /// Per support point: the area-weighted input vertex normal, unit length.
     support_normal: Vec<Vec3>,
@@ -313,7 +314,12 @@ impl<'m> Simplifier<'m> {
     // -----------------------------------------------------------------------------------------
     // Adjacency
 
-    fn new(mesh: &'m TriMesh, tris: Vec<[u32; 3]>, config: &SimplifyConfig) -> Self {
+    fn new(
+        mesh: &'m TriMesh,
+        tris: Vec<[u32; 3]>,
+        config: &SimplifyConfig,
+        extra_points: usize,
+    ) -> Self {
         let n = mesh.vertices.len();
         let f = tris.len();
         let threshold_m = config.max_residual_m;
@@ -346,9 +352,9 @@ impl<'m> Simplifier<'m> {
                     face: NONE,
                     next: NONE,
                 };
-                n
+                n + extra_points
             ],
-            support_normal: vec![Vec3::ZERO; n],
+            support_normal: vec![Vec3::ZERO; n + extra_points],
             face_support: vec![NONE; f],
             fail_hint: vec![NONE; n],
             queue: EdgeQueue::with_capacity(3 * f / 2 + 16),
@@ -577,6 +583,49 @@ impl<'m> Simplifier<'m> {
                 self.face_support[f as usize] = v as u32;
                 self.support_normal[v] = self.support_normal[v].normalize_or_zero();
             }
+        }
+    }
+
+    /// Makes each of `points` a support point (after the input vertices' own), assigned to its
+    /// nearest face with no normal (it never vetoes a face's orientation). A point farther than
+    /// the threshold from every face cannot be held to it and is left out, counted in the
+    /// report. Every face is tried per point, nearest plane first: this runs on meshes that are
+    /// already small (the extra points are for a second pass over a simplified mesh).
+    fn add_extra_support(&mut self, points: &[Vec3]) {
+        let faces: Vec<TriangleQuery> = self
+            .tris
+            .iter()
+            .map(|t| {
+                let p = t.map(|v| self.vertex[v as usize].pos);
+                TriangleQuery::new(p[0], p[1], p[2])
+            })
+            .collect();
+        let first = self.input.len();
+        for (i, &x) in points.iter().enumerate() {
+            let mut best = (f32::INFINITY, NONE, [0.0; 2]);
+            for (f, tri) in faces.iter().enumerate() {
+                let h = tri.plane_distance(x);
+                if h * h >= best.0 {
+                    continue;
+                }
+                let (d, weights) = tri.closest(x);
+                if d < best.0 {
+                    best = (d, f as u32, weights);
+                }
+            }
+            let (d, f, weights) = best;
+            if f == NONE || !x.is_finite() || d > self.threshold_sq {
+                self.report.points_beyond_bound += 1;
+                continue;
+            }
+            let p = first + i;
+            self.support[p] = Support {
+                position: x,
+                weights,
+                face: f,
+                next: self.face_support[f as usize],
+            };
+            self.face_support[f as usize] = p as u32;
         }
     }
 
@@ -1194,11 +1243,11 @@ impl<'m> Simplifier<'m> {
     /// report with the residual actually reached (exact distances to the assigned faces).
     fn finish(mut self) -> (TriMesh, SimplifyReport) {
         let mut max_sq = 0.0f32;
-        for p in 0..self.input.len() {
-            let f = self.support[p].face;
+        for support in &self.support {
+            let f = support.face;
             if f != NONE {
                 let c = self.tris[f as usize].map(|v| self.vertex[v as usize].pos);
-                let d = TriangleQuery::new(c[0], c[1], c[2]).distance_sq(self.input[p]);
+                let d = TriangleQuery::new(c[0], c[1], c[2]).distance_sq(support.position);
                 max_sq = max_sq.max(d);
             }
         }
@@ -1247,6 +1296,20 @@ pub fn simplify(
     mesh: &TriMesh,
     config: &SimplifyConfig,
 ) -> Result<(TriMesh, SimplifyReport), SimplifyError> {
+    simplify_near_points(mesh, &[], config)
+}
+
+/// As [`simplify`], with `points` held to the output as well: no collapse may leave one of them
+/// farther than `config.max_residual_m` from the surface, besides the input vertices. A point
+/// already farther than that from the input mesh is left out (counted in
+/// [`SimplifyReport::points_beyond_bound`]). Meant for a second pass over a mesh that is
+/// already small, held to the data it was fitted to (each point is matched against every face
+/// at the start).
+pub fn simplify_near_points(
+    mesh: &TriMesh,
+    points: &[Vec3],
+    config: &SimplifyConfig,
+) -> Result<(TriMesh, SimplifyReport), SimplifyError> {
     // NaN is neither below nor at or above zero.
     if config.max_residual_m.is_nan() || config.max_residual_m < 0.0 {
         return Err(SimplifyError::InvalidMaxResidual {
@@ -1254,8 +1317,15 @@ pub fn simplify(
         });
     }
     let tris = validate(mesh)?;
-    let mut s = Simplifier::new(mesh, tris, config);
+    if mesh.vertices.len() + points.len() > NONE as usize {
+        return Err(SimplifyError::TooLarge {
+            triangles: tris.len(),
+            vertices: mesh.vertices.len() + points.len(),
+        });
+    }
+    let mut s = Simplifier::new(mesh, tris, config, points.len());
     s.init_quadrics_and_support();
+    s.add_extra_support(points);
     s.rank_all();
     s.run();
     let (out, report) = s.finish();

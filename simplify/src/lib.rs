@@ -3,6 +3,9 @@
 //! Entry point: [`simplify`] takes a [`TriMesh`](tacmesh_source::TriMesh) (usually a dense
 //! marching-cubes mesh) and a [`SimplifyConfig`], and returns the simplified mesh with a
 //! [`SimplifyReport`] of what it did, including the residual it actually reached.
+//! [`simplify_near_points`] holds extra points to the same bound besides the mesh's own
+//! vertices: the pipeline's second pass over a fitted mesh, held to the marching-cubes mesh the
+//! first pass started from.
 //!
 //! # Method
 //!
@@ -62,7 +65,7 @@ mod min_heap;
 mod point_triangle;
 mod quadric;
 
-pub use edge_collapse::simplify;
+pub use edge_collapse::{simplify, simplify_near_points};
 pub use fit_to_samples::{fit_to_samples, FitConfig, FitReport, WeightedSample};
 
 use glam::Vec3;
@@ -105,9 +108,13 @@ pub struct SimplifyReport {
     pub rejected_by_topology: usize,
     /// Refusals because a triangle would flip, fold, degenerate or become a needle.
     pub rejected_by_geometry: usize,
-    /// Metres: the largest distance from a support point (input vertex) to its assigned output
-    /// face; never above the configured `max_residual_m`.
+    /// Metres: the largest distance from a support point (input vertex, or extra point of
+    /// [`simplify_near_points`]) to its assigned output face; never above the configured
+    /// `max_residual_m`.
     pub max_residual_m: f32,
+    /// Extra points of [`simplify_near_points`] left out because they were already farther
+    /// than `max_residual_m` from the input mesh.
+    pub points_beyond_bound: usize,
 }
 
 /// Why [`simplify`] refused its input.

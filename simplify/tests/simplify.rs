@@ -2,7 +2,9 @@
 
 mod util;
 
-use tacmesh_simplify::{simplify, SimplifyConfig, SimplifyError};
+use tacmesh_simplify::{
+    simplify, simplify_near_points, SimplifyConfig, SimplifyError, SimplifyReport,
+};
 use tacmesh_source::glam::Vec3;
 use tacmesh_source::TriMesh;
 use util::*;
@@ -440,6 +442,105 @@ fn random_soups_never_panic_and_keep_the_bound() {
                 assert!(worst <= max_residual_m + 1e-5, "round {round}: {worst}");
             }
         }
+    }
+}
+
+fn run_near(mesh: &TriMesh, points: &[Vec3], max_residual_m: f32) -> (TriMesh, SimplifyReport) {
+    simplify_near_points(
+        mesh,
+        points,
+        &SimplifyConfig {
+            max_residual_m,
+            ..SimplifyConfig::default()
+        },
+    )
+    .expect("valid input simplifies")
+}
+
+/// A bumpy patch whose plain simplification leans up to the bound away from its vertices.
+fn bumpy_grid() -> TriMesh {
+    let mut mesh = grid(24, 1.0);
+    for v in &mut mesh.vertices {
+        v.z = 0.05 * (6.0 * v.x).sin() * (4.0 * v.y).cos();
+    }
+    mesh
+}
+
+#[test]
+fn extra_points_are_held_to_the_bound_and_cost_faces() {
+    let mesh = bumpy_grid();
+    let bound = 0.03;
+    // Points 2 cm above every vertex: within the bound of the input, but on one side of it,
+    // so the output may no longer lean the other way by up to the bound.
+    let above: Vec<Vec3> = mesh.vertices.iter().map(|&v| v + 0.02 * Vec3::Z).collect();
+    let (plain, _) = run(&mesh, bound);
+    let (held, report) = run_near(&mesh, &above, bound);
+    assert_eq!(report.points_beyond_bound, 0);
+    assert!(
+        held.triangles.len() > plain.triangles.len(),
+        "held {} faces, plain {}",
+        held.triangles.len(),
+        plain.triangles.len()
+    );
+    let worst_point = above
+        .iter()
+        .map(|&p| point_mesh_distance(p, &held))
+        .fold(0.0, f32::max);
+    assert!(worst_point <= bound * 1.0001 + 1e-6, "{worst_point}");
+    assert!(max_vertex_distance(&mesh, &held) <= bound * 1.0001 + 1e-6);
+    assert!(report.max_residual_m <= bound);
+    assert!(worst_point <= report.max_residual_m * 1.0001 + 1e-6);
+    assert_manifold(&held);
+    assert_no_degenerate_or_duplicate(&held);
+}
+
+#[test]
+fn extra_points_beyond_the_bound_are_left_out_and_counted() {
+    let mesh = bumpy_grid();
+    let bound = 0.03;
+    let far = [
+        Vec3::new(0.5, 0.5, 1.0),
+        Vec3::new(0.2, 0.7, -0.5),
+        Vec3::NAN,
+        Vec3::INFINITY,
+    ];
+    let (plain, _) = run(&mesh, bound);
+    let (out, report) = run_near(&mesh, &far, bound);
+    assert_eq!(report.points_beyond_bound, far.len());
+    assert_eq!(out, plain, "points left out change nothing");
+    let (none, report) = run_near(&mesh, &[], bound);
+    assert_eq!(report.points_beyond_bound, 0);
+    assert_eq!(none, plain);
+}
+
+#[test]
+fn extra_points_keep_the_checks_on_a_closed_mesh() {
+    // A sphere held to the vertices of a finer sphere, both within 4 mm of radius 0.5: closed,
+    // manifold, and every point that was within the bound still is; the others are counted.
+    let mut noise = Noise::new(5);
+    let sphere = icosphere(3, 0.5, |_| 0.004 * noise.next());
+    let points: Vec<Vec3> = icosphere(4, 0.5, |_| 0.004 * noise.next()).vertices;
+    for bound in [0.005, 0.02] {
+        let (out, report) = run_near(&sphere, &points, bound);
+        assert_manifold(&out);
+        assert!(boundary_edges(&out).is_empty());
+        let beyond = |factor: f32| {
+            points
+                .iter()
+                .filter(|&&p| point_mesh_distance(p, &sphere) > factor * bound)
+                .count()
+        };
+        let left_out = report.points_beyond_bound;
+        assert!(
+            (beyond(1.001)..=beyond(0.999)).contains(&left_out),
+            "bound {bound}: {left_out} left out"
+        );
+        let worst = points
+            .iter()
+            .filter(|&&p| point_mesh_distance(p, &sphere) <= bound * 0.999)
+            .map(|&p| point_mesh_distance(p, &out))
+            .fold(0.0, f32::max);
+        assert!(worst <= bound * 1.0001 + 1e-6, "bound {bound}: {worst}");
     }
 }
 

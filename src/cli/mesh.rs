@@ -30,8 +30,8 @@ pub struct MeshArgs {
     #[arg(long)]
     max_residual_m: Option<f32>,
     /// Error target mode: the mean Hausdorff error, metres, to aim at with as few faces as
-    /// that allows; sets the residual bound to 3.75 times it (on the paper's shapes at 20 mm
-    /// noise the error comes out at 0.02–0.25 of the bound, flat shapes lowest)
+    /// that allows; sets the residual bound to 3.5 times it (on the paper's shapes at 20 mm
+    /// noise the error comes out at 0.02–0.27 of the bound, flat shapes lowest)
     #[arg(long, value_name = "METRES", value_parser = parse_target_mhe, allow_hyphen_values = true, conflicts_with = "max_residual_m")]
     target_mhe_m: Option<f32>,
     /// Multiply the cloud's coordinates by FACTOR to make them metres: 0.001 for a cloud in
