@@ -39,6 +39,7 @@ use tacmesh_source::TriMesh;
 use crate::min_heap::MinHeap;
 use crate::point_triangle::TriangleQuery;
 use crate::quadric::Quadric;
+use crate::triangle_grid::TriangleGrid;
 use crate::{SimplifyConfig, SimplifyError, SimplifyReport};
 
 /// Weight of a boundary constraint plane per square metre of its edge, relative to face planes
@@ -589,28 +590,43 @@ impl<'m> Simplifier<'m> {
     /// Makes each of `points` a support point (after the input vertices' own), assigned to its
     /// nearest face with no normal (it never vetoes a face's orientation). A point farther than
     /// the threshold from every face cannot be held to it and is left out, counted in the
-    /// report. Every face is tried per point, nearest plane first: this runs on meshes that are
-    /// already small (the extra points are for a second pass over a simplified mesh).
+    /// report. The faces within the threshold of a point come from a grid of threshold-sized
+    /// cells (without it, every face was tried per point: 8 ms of a 9 ms second pass for
+    /// 10,000 points over 60 faces); with a zero or infinite threshold every face is tried.
     fn add_extra_support(&mut self, points: &[Vec3]) {
+        if points.is_empty() {
+            return;
+        }
+        let corners = |t: &[u32; 3]| t.map(|v| self.vertex[v as usize].pos);
         let faces: Vec<TriangleQuery> = self
             .tris
             .iter()
             .map(|t| {
-                let p = t.map(|v| self.vertex[v as usize].pos);
-                TriangleQuery::new(p[0], p[1], p[2])
+                let [a, b, c] = corners(t);
+                TriangleQuery::new(a, b, c)
             })
             .collect();
+        let reach = self.threshold_m;
+        let grid = (reach.is_finite() && reach > 0.0).then(|| {
+            TriangleGrid::new(self.tris.iter().map(corners), points.iter().copied(), reach)
+        });
+        let every_face: Vec<u32> = match grid {
+            Some(_) => Vec::new(),
+            None => (0..faces.len() as u32).collect(),
+        };
         let first = self.input.len();
         for (i, &x) in points.iter().enumerate() {
+            let candidates = grid.as_ref().map_or(every_face.as_slice(), |g| g.near(x));
             let mut best = (f32::INFINITY, NONE, [0.0; 2]);
-            for (f, tri) in faces.iter().enumerate() {
+            for &f in candidates {
+                let tri = &faces[f as usize];
                 let h = tri.plane_distance(x);
                 if h * h >= best.0 {
                     continue;
                 }
                 let (d, weights) = tri.closest(x);
                 if d < best.0 {
-                    best = (d, f as u32, weights);
+                    best = (d, f, weights);
                 }
             }
             let (d, f, weights) = best;
@@ -1303,8 +1319,8 @@ pub fn simplify(
 /// farther than `config.max_residual_m` from the surface, besides the input vertices. A point
 /// already farther than that from the input mesh is left out (counted in
 /// [`SimplifyReport::points_beyond_bound`]). Meant for a second pass over a mesh that is
-/// already small, held to the data it was fitted to (each point is matched against every face
-/// at the start).
+/// already small, held to the data it was fitted to (each point is matched at the start
+/// against the faces within the bound of it, found through a grid of bound-sized cells).
 pub fn simplify_near_points(
     mesh: &TriMesh,
     points: &[Vec3],

@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use tacmesh_source::TriMesh;
 
 use crate::point_triangle::TriangleQuery;
+use crate::triangle_grid::TriangleGrid;
 
 /// A data point with a weight (for a voxel centroid: the number of points it stands for).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -62,63 +63,6 @@ struct Assignment {
     distance_sq_m2: f32,
 }
 
-/// Triangles bucketed in a uniform grid of `cell_m` cubes: each triangle goes in every cell
-/// that its bounding box grown by `cell_m` touches and that holds a sample, so a sample's cell
-/// lists every triangle within `cell_m` of it. The output mesh is small (tens to hundreds of
-/// triangles), so a flat grid is all the acceleration the nearest-triangle search needs.
-///
-/// Only cells with samples are filled, and each triangle walks its own cells or the occupied
-/// ones, whichever are fewer: a triangle much larger than `cell_m` (a flat face of a large
-/// object under a tight residual) spans millions of cells, nearly all empty, and filling them
-/// all took over a minute and hundreds of megabytes (found by fuzzing, see `fuzz/README.md`).
-struct TriangleGrid {
-    cell_m: f32,
-    cells: rustc_hash::FxHashMap<glam::IVec3, Vec<u32>>,
-}
-
-impl TriangleGrid {
-    fn new(mesh: &TriMesh, samples: &[WeightedSample], cell_m: f32) -> Self {
-        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
-        let mut cells: rustc_hash::FxHashMap<glam::IVec3, Vec<u32>> = samples
-            .iter()
-            .map(|s| (cell_of(s.point), Vec::new()))
-            .collect();
-        let occupied: Vec<glam::IVec3> = cells.keys().copied().collect();
-        for t in 0..mesh.triangles.len() {
-            let [a, b, c] = mesh.corners(t);
-            let lo = cell_of(a.min(b).min(c) - cell_m);
-            let hi = cell_of(a.max(b).max(c) + cell_m);
-            let span = (hi.as_i64vec3() - lo.as_i64vec3() + 1).max(glam::I64Vec3::ZERO);
-            let box_cells = span.x.saturating_mul(span.y).saturating_mul(span.z);
-            if box_cells <= occupied.len() as i64 {
-                for z in lo.z..=hi.z {
-                    for y in lo.y..=hi.y {
-                        for x in lo.x..=hi.x {
-                            if let Some(triangles) = cells.get_mut(&glam::IVec3::new(x, y, z)) {
-                                triangles.push(t as u32);
-                            }
-                        }
-                    }
-                }
-            } else {
-                for cell in &occupied {
-                    if cell.cmpge(lo).all() && cell.cmple(hi).all() {
-                        if let Some(triangles) = cells.get_mut(cell) {
-                            triangles.push(t as u32);
-                        }
-                    }
-                }
-            }
-        }
-        Self { cell_m, cells }
-    }
-
-    fn near(&self, p: Vec3) -> &[u32] {
-        let cell = (p / self.cell_m).floor().as_ivec3();
-        self.cells.get(&cell).map_or(&[], |v| v.as_slice())
-    }
-}
-
 fn assign(mesh: &TriMesh, samples: &[WeightedSample], reject_m: f32) -> Vec<Option<Assignment>> {
     let queries: Vec<TriangleQuery> = (0..mesh.triangles.len())
         .map(|t| {
@@ -126,7 +70,11 @@ fn assign(mesh: &TriMesh, samples: &[WeightedSample], reject_m: f32) -> Vec<Opti
             TriangleQuery::new(a, b, c)
         })
         .collect();
-    let grid = TriangleGrid::new(mesh, samples, reject_m);
+    let grid = TriangleGrid::new(
+        (0..mesh.triangles.len()).map(|t| mesh.corners(t)),
+        samples.iter().map(|s| s.point),
+        reject_m,
+    );
     let reject_sq = reject_m * reject_m;
     samples
         .par_iter()
@@ -388,7 +336,11 @@ mod tests {
             .iter()
             .map(|&point| WeightedSample { point, weight: 1.0 })
             .collect();
-        let grid = TriangleGrid::new(&mesh, &samples, 0.0025);
+        let grid = TriangleGrid::new(
+            (0..mesh.triangles.len()).map(|t| mesh.corners(t)),
+            samples.iter().map(|s| s.point),
+            0.0025,
+        );
         assert!(
             grid.cells.len() <= samples.len(),
             "{} cells",

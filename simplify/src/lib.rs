@@ -64,6 +64,7 @@ mod fit_to_samples;
 mod min_heap;
 mod point_triangle;
 mod quadric;
+mod triangle_grid;
 
 pub use edge_collapse::{simplify, simplify_near_points};
 pub use fit_to_samples::{fit_to_samples, FitConfig, FitReport, WeightedSample};
