@@ -410,6 +410,59 @@ fn cube_and_cylinder_keep_their_planes_and_edges_with_few_faces() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// Issue 14's density bound, on seeds the tuning did not see: at 20 mm noise the cube from
+/// 20,000 points has at most 1.5 times the faces it has from 40,000 (medians), and every mesh
+/// at most 16 faces, closed and within Table 1's error. With one pass after the fit the cube
+/// kept 12-24 faces (24 at 40,000 points, seed 41; 18-24 at 20,000 on seeds 101-103, whose
+/// coarser voxel rounds the edges more): the chamfers straighten only over several fits.
+#[test]
+fn the_cube_from_half_the_points_keeps_its_few_faces() {
+    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
+    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
+    let truth = Shape::Cube.mesh();
+    let mut lines = Vec::new();
+    let mut faces_at = |points: usize, seed: u64| {
+        let cloud = sample_cloud(
+            &truth,
+            &SampleConfig {
+                points,
+                noise_sigma_m: 0.02,
+                seed,
+            },
+        )
+        .expect("samples");
+        let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
+        let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
+            .expect("measures")
+            .mhe_m;
+        lines.push(format!(
+            "{points} points, seed {seed}: {} faces ({} after the first pass), closed {}, \
+             MHE {mhe:.5}",
+            report.faces, report.first_pass_faces, report.closed
+        ));
+        assert!(
+            report.closed && report.faces <= 16 && mhe <= 0.00488,
+            "{lines:#?}"
+        );
+        report.faces
+    };
+    let (mut dense, mut half) = (Vec::new(), Vec::new());
+    for seed in [41, 42, 43] {
+        dense.push(faces_at(40_000, seed));
+        half.push(faces_at(20_000, seed));
+    }
+    println!("{lines:#?}");
+    let median = |mut v: Vec<usize>| {
+        v.sort_unstable();
+        v[v.len() / 2]
+    };
+    let (dense, half) = (median(dense), median(half));
+    assert!(
+        2 * half <= 3 * dense,
+        "median {half} faces at 20,000 points against {dense} at 40,000: {lines:#?}"
+    );
+}
+
 /// The error-target mode aims at a mean error with as few faces as that allows: at Table 1's
 /// MHE the sphere needs half Table 1's faces (116 / 2), and its error stays under the target
 /// (an unseen seed). It takes no residual bound beside it.
