@@ -342,11 +342,11 @@ mod tests {
             0.0025,
         );
         assert!(
-            grid.cells.len() <= samples.len(),
+            grid.lists.len() <= samples.len(),
             "{} cells",
-            grid.cells.len()
+            grid.lists.len()
         );
-        assert!(grid.cells.values().all(|triangles| !triangles.is_empty()));
+        assert!(grid.lists.iter().all(|triangles| !triangles.is_empty()));
         let report = fit_to_samples(
             &mut mesh,
             &samples,

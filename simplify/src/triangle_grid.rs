@@ -6,20 +6,28 @@ use glam::{I64Vec3, IVec3, Vec3};
 use rustc_hash::FxHashMap;
 
 /// Triangles bucketed in a uniform grid of `cell_m` cubes: each triangle goes in every cell
-/// that its bounding box grown by `cell_m` touches and that holds a query point, so a point's
-/// cell lists every triangle within `cell_m` of it (in ascending triangle order). The meshes
-/// it serves are small (tens to hundreds of triangles), so a flat grid is all the acceleration
+/// that holds a query point, touches its bounding box grown by `cell_m`, and has its centre
+/// within `cell_m` plus half the cell's diagonal of the triangle's plane, so a point's cell
+/// lists every triangle within `cell_m` of it (in ascending triangle order). The meshes it
+/// serves are small (tens to hundreds of triangles), so a flat grid is all the acceleration
 /// they need.
 ///
-/// Only cells with query points are filled, and each triangle walks its own cells or the
-/// occupied ones, whichever are fewer: a triangle much larger than `cell_m` (a flat face of a
-/// large object under a tight residual) spans millions of cells, nearly all empty, and filling
-/// them all took over a minute and hundreds of megabytes (found by fuzzing, see
-/// `fuzz/README.md`).
+/// Only cells with query points are filled. A triangle whose grown box spans few cells walks
+/// them through the map; a larger one (a flat face of a large object under a tight residual
+/// spans millions of cells, nearly all empty: filling them all took over a minute and hundreds
+/// of megabytes, found by fuzzing, see `fuzz/README.md`) is tested against each occupied cell,
+/// box and plane, with no hashing. The plane test keeps a large face out of the cells its box
+/// only grazes: fewer exact distances for the queries.
 pub(crate) struct TriangleGrid {
     cell_m: f32,
-    pub(crate) cells: FxHashMap<IVec3, Vec<u32>>,
+    /// Occupied cell -> index into `lists`.
+    index: FxHashMap<IVec3, u32>,
+    pub(crate) lists: Vec<Vec<u32>>,
 }
+
+/// A triangle's grown box spanning at most this many cells walks them; a larger one is tested
+/// against every occupied cell.
+const MAX_WALKED_CELLS: i64 = 64;
 
 impl TriangleGrid {
     /// `triangles` gives the corners of each triangle in order; `points` are where
@@ -31,43 +39,66 @@ impl TriangleGrid {
         cell_m: f32,
     ) -> Self {
         let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
-        let mut cells: FxHashMap<IVec3, Vec<u32>> = points
-            .filter(|p| p.is_finite())
-            .map(|p| (cell_of(p), Vec::new()))
-            .collect();
-        let occupied: Vec<IVec3> = cells.keys().copied().collect();
+        let mut index: FxHashMap<IVec3, u32> = FxHashMap::default();
+        let mut occupied: Vec<IVec3> = Vec::new();
+        for p in points.filter(|p| p.is_finite()) {
+            let cell = cell_of(p);
+            index.entry(cell).or_insert_with(|| {
+                occupied.push(cell);
+                (occupied.len() - 1) as u32
+            });
+        }
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); occupied.len()];
+        // A point within `cell_m` of the triangle is within `cell_m` of its plane, and the
+        // cell's centre within half the diagonal of the point; a little more for rounding,
+        // relative to the cell and to how far from the origin it is.
+        let plane_reach = cell_m * (1.0 + 0.5 * 3f32.sqrt()) * 1.001;
+        let centre_of = |cell: IVec3| (cell.as_vec3() + 0.5) * cell_m;
+        let rounding = |centre: Vec3| 16.0 * f32::EPSILON * centre.abs().max_element();
         for (t, [a, b, c]) in triangles.enumerate() {
+            let normal = (b - a).cross(c - a).normalize_or_zero();
+            let near_plane = |cell: IVec3| {
+                let centre = centre_of(cell);
+                normal.dot(centre - a).abs() <= plane_reach + rounding(centre) + rounding(a)
+            };
             let lo = cell_of(a.min(b).min(c) - cell_m);
             let hi = cell_of(a.max(b).max(c) + cell_m);
             let span = (hi.as_i64vec3() - lo.as_i64vec3() + 1).max(I64Vec3::ZERO);
             let box_cells = span.x.saturating_mul(span.y).saturating_mul(span.z);
-            if box_cells <= occupied.len() as i64 {
+            if box_cells <= MAX_WALKED_CELLS {
                 for z in lo.z..=hi.z {
                     for y in lo.y..=hi.y {
                         for x in lo.x..=hi.x {
-                            if let Some(triangles) = cells.get_mut(&IVec3::new(x, y, z)) {
-                                triangles.push(t as u32);
+                            let cell = IVec3::new(x, y, z);
+                            if let Some(&i) = index.get(&cell) {
+                                if near_plane(cell) {
+                                    lists[i as usize].push(t as u32);
+                                }
                             }
                         }
                     }
                 }
             } else {
-                for cell in &occupied {
-                    if cell.cmpge(lo).all() && cell.cmple(hi).all() {
-                        if let Some(triangles) = cells.get_mut(cell) {
-                            triangles.push(t as u32);
-                        }
+                for (i, &cell) in occupied.iter().enumerate() {
+                    if cell.cmpge(lo).all() && cell.cmple(hi).all() && near_plane(cell) {
+                        lists[i].push(t as u32);
                     }
                 }
             }
         }
-        Self { cell_m, cells }
+        Self {
+            cell_m,
+            index,
+            lists,
+        }
     }
 
     /// The triangles that can be within `cell_m` of `p` (a superset of them), ascending.
     pub(crate) fn near(&self, p: Vec3) -> &[u32] {
         let cell = (p / self.cell_m).floor().as_ivec3();
-        self.cells.get(&cell).map_or(&[], |v| v.as_slice())
+        self.index
+            .get(&cell)
+            .map_or(&[], |&i| self.lists[i as usize].as_slice())
     }
 }
 
@@ -76,44 +107,56 @@ mod tests {
     use super::*;
     use crate::point_triangle::TriangleQuery;
 
-    /// Every triangle within `cell_m` of a point is listed in its cell, for triangles small and
-    /// large against the cell (the large ones take the occupied-cells path).
+    /// Every triangle within `cell_m` of a point is listed in its cell, for triangles small
+    /// (their box walked), middling and large (tested against each occupied cell) against the
+    /// cell, near the origin and 100 m from it.
     #[test]
     fn a_cell_lists_every_triangle_within_reach() {
-        // A small deterministic generator: the test needs spread, not statistics.
-        let mut state = 0x2545_f491_u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
-        let mut random_point = |scale: f32| Vec3::new(next(), next(), next()) * scale;
-        let triangles: Vec<[Vec3; 3]> = (0..60)
-            .map(|i| {
-                let size = if i % 3 == 0 { 2.0 } else { 0.05 };
-                let a = random_point(1.0);
-                [a, a + random_point(size), a + random_point(size)]
-            })
-            .collect();
-        let points: Vec<Vec3> = (0..400).map(|_| random_point(1.2) - 0.1).collect();
-        let cell_m = 0.03;
-        let grid = TriangleGrid::new(triangles.iter().copied(), points.iter().copied(), cell_m);
-        let mut within = 0;
-        for &p in &points {
-            let near = grid.near(p);
-            assert!(near.windows(2).all(|w| w[0] < w[1]), "ascending: {near:?}");
-            for (t, [a, b, c]) in triangles.iter().enumerate() {
-                let d = TriangleQuery::new(*a, *b, *c).distance_sq(p).sqrt();
-                if d <= cell_m {
-                    within += 1;
-                    assert!(near.contains(&(t as u32)), "triangle {t} at {d} m of {p}");
+        for offset in [Vec3::ZERO, Vec3::new(100.0, -60.0, 30.0)] {
+            // A small deterministic generator: the test needs spread, not statistics.
+            let mut state = 0x2545_f491_u32;
+            let mut next = move || {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                state as f32 / u32::MAX as f32
+            };
+            let mut random_point = |scale: f32| Vec3::new(next(), next(), next()) * scale;
+            let triangles: Vec<[Vec3; 3]> = (0..90)
+                .map(|i| {
+                    let size = [2.0, 0.05, 0.004][i % 3];
+                    let a = offset + random_point(1.0);
+                    [a, a + random_point(size), a + random_point(size)]
+                })
+                .collect();
+            // Half spread through the volume, half next to a triangle's corner.
+            let points: Vec<Vec3> = (0..600)
+                .map(|i| {
+                    if i % 2 == 0 {
+                        offset + random_point(1.2) - 0.1
+                    } else {
+                        triangles[(i / 2) % triangles.len()][0] + random_point(0.06) - 0.03
+                    }
+                })
+                .collect();
+            let cell_m = 0.03;
+            let grid = TriangleGrid::new(triangles.iter().copied(), points.iter().copied(), cell_m);
+            let mut within = [0; 3];
+            for &p in &points {
+                let near = grid.near(p);
+                assert!(near.windows(2).all(|w| w[0] < w[1]), "ascending: {near:?}");
+                for (t, [a, b, c]) in triangles.iter().enumerate() {
+                    let d = TriangleQuery::new(*a, *b, *c).distance_sq(p).sqrt();
+                    if d <= cell_m {
+                        within[t % 3] += 1;
+                        assert!(near.contains(&(t as u32)), "triangle {t} at {d} m of {p}");
+                    }
                 }
             }
+            assert!(
+                within.iter().all(|&n| n > 3),
+                "the test must exercise every kind of triangle: {within:?} pairs within reach"
+            );
         }
-        assert!(
-            within > 20,
-            "the test must exercise the grid: {within} pairs within reach"
-        );
     }
 }
