@@ -170,9 +170,9 @@ pub struct MeshReport {
     pub orient_ms: f64,
     pub distance_ms: f64,
     pub marching_cubes_ms: f64,
-    /// Every simplification pass; of which the passes after the fit (0 with the fit off).
+    /// Every simplification pass, and of it the passes after the fit (0 with the fit off).
     pub simplify_ms: f64,
-    pub second_pass_ms: f64,
+    pub refine_ms: f64,
     /// Weighted RMS distance of the data (voxel centroids) to the mesh before and after the
     /// fit, and the largest vertex move it made, metres (zeros when the fit is off).
     pub fit_rms_before: f32,
@@ -465,8 +465,8 @@ fn simplify_and_fit(
     let mut simplify_ms = first_pass_ms;
 
     let fit_start = Instant::now();
-    let mut second_pass = None;
-    let mut second_pass_ms = 0.0;
+    let mut last_pass = None;
+    let mut refine_ms = 0.0;
     let fit = if fit_to_data {
         // Centroids of voxels twice the marching-cubes size: a quarter of the samples, each
         // the mean of several points, and still far finer than the simplified triangles.
@@ -507,8 +507,8 @@ fn simplify_and_fit(
                     ..SimplifyConfig::default()
                 },
             )?;
-            second_pass = Some(pass);
-            second_pass_ms += pass_start.elapsed().as_secs_f64() * 1e3;
+            last_pass = Some(pass);
+            refine_ms += pass_start.elapsed().as_secs_f64() * 1e3;
             if merged.triangles.len() >= mesh.triangles.len() {
                 break;
             }
@@ -522,7 +522,7 @@ fn simplify_and_fit(
                 break;
             }
         }
-        simplify_ms += second_pass_ms;
+        simplify_ms += refine_ms;
         fit
     } else {
         Default::default()
@@ -544,10 +544,10 @@ fn simplify_and_fit(
         first_pass_faces: simplified.faces_out,
         faces: mesh.triangles.len(),
         vertices: mesh.vertices.len(),
-        max_residual: second_pass.map_or(simplified.max_residual_m, |second| second.max_residual_m),
-        vertices_beyond_bound: second_pass.map_or(0, |second| second.points_beyond_bound),
+        max_residual: last_pass.map_or(simplified.max_residual_m, |last| last.max_residual_m),
+        vertices_beyond_bound: last_pass.map_or(0, |last| last.points_beyond_bound),
         simplify_ms,
-        second_pass_ms,
+        refine_ms,
         fit_rms_before: fit.rms_before_m,
         fit_rms_after: fit.rms_after_m,
         fit_max_move: fit.max_move_m,
