@@ -110,8 +110,8 @@ pub const DEFAULT_RESIDUAL_OF_EXTENT: f32 = 0.025;
 /// early once a pass removes nothing). Measured on the paper's shapes, seeds 101-103: three
 /// against one, fewer faces or as many everywhere (the cube at 20,000 points 20 -> 14, the cone
 /// 34 -> 26 and the cylinder at 5,000 points 66 -> 48, both at 20 mm), the MHE within 0.9-1.1x
-/// at 20-30 mm (at 40 mm see [`MAX_UNHELD_PER_VERTEX`]); each pass costs 2-4 ms and its fit
-/// 3-6 ms on a 1 m object.
+/// at 20-30 mm (at 40 mm see [`MAX_UNHELD_PER_VERTEX`]); each pass costs 2-4 ms on a 1 m
+/// object, and its fit one iteration ([`REFIT_ITERATIONS`]).
 pub const REFINE_PASSES: usize = 3;
 
 /// Iterations of the fit after each pass (the first fit has 3): the vertices a pass leaves are
@@ -501,7 +501,7 @@ fn simplify_and_fit(
         // removes them, and a fit places what is left; that fit can straighten more, so the
         // two repeat while a pass removes faces, at most `REFINE_PASSES` times (cube at 20 mm:
         // 28-34 faces after the first pass, 12-14 after one more; at 20,000 points 54-60,
-        // 18-24 after one and 14 after three). A vertex the fit carried beyond the bound is
+        // 18-24 after one and 12-16 after three). A vertex the fit carried beyond the bound is
         // not held (there is no face it could be held to); the report counts them.
         for _ in 0..REFINE_PASSES {
             let pass_start = Instant::now();
