@@ -306,6 +306,34 @@ fn eval_contact_reports_every_radius_in_millimetres_and_degrees() {
     }
 }
 
+/// Samples `shape` with `points` points and `noise_m` of noise (seed `seed`), meshes the cloud
+/// with the default pipeline, and judges the mesh against the shape (MHE over 20,000 samples
+/// per side, metres): the robustness tests of issue 14 below.
+fn mesh_sampled_shape(
+    shape: tacmesh::sim::Shape,
+    points: usize,
+    noise_m: f32,
+    seed: u64,
+) -> (tacmesh::pipeline::MeshReport, f64) {
+    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
+    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig};
+    let truth = shape.mesh();
+    let cloud = sample_cloud(
+        &truth,
+        &SampleConfig {
+            points,
+            noise_sigma_m: noise_m,
+            seed,
+        },
+    )
+    .expect("samples");
+    let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
+    let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
+        .expect("measures")
+        .mhe_m;
+    (report, mhe)
+}
+
 /// Issue 14's robustness bounds, on seeds the tuning did not see: at 40 mm noise (40,000
 /// points) and at 5,000 points (20 mm noise, and none) every shape comes out as one closed piece with no
 /// more faces than the paper's Table 1 gives at 20 mm and dense clouds, and within 1.5 times
@@ -313,8 +341,7 @@ fn eval_contact_reports_every_radius_in_millimetres_and_degrees() {
 /// at 40 mm, and at 5,000 points every mesh was open and in pieces.
 #[test]
 fn high_noise_and_sparse_clouds_close_with_few_faces() {
-    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
-    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
+    use tacmesh::sim::Shape;
     // (shape, Table 1's faces, Table 1's MHE in metres)
     let table1 = [
         (Shape::Cone, 104, 0.00887),
@@ -327,20 +354,7 @@ fn high_noise_and_sparse_clouds_close_with_few_faces() {
     let mut failures = Vec::new();
     for (points, noise_m) in [(40_000, 0.04), (5_000, 0.02), (5_000, 0.0)] {
         for (shape, faces_bound, mhe_bound) in table1 {
-            let truth = shape.mesh();
-            let cloud = sample_cloud(
-                &truth,
-                &SampleConfig {
-                    points,
-                    noise_sigma_m: noise_m,
-                    seed: 21,
-                },
-            )
-            .expect("samples");
-            let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
-            let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
-                .expect("measures")
-                .mhe_m;
+            let (report, mhe) = mesh_sampled_shape(shape, points, noise_m, 21);
             let line = format!(
                 "{} at {points} points, {:.0} mm: {} faces, {} pieces, closed {}, MHE {mhe:.5} \
                  (voxel {:.1} mm, noise {:.1} mm, spacing {:.1} mm)",
@@ -373,27 +387,13 @@ fn high_noise_and_sparse_clouds_close_with_few_faces() {
 /// that marching cubes' rounding had needed.
 #[test]
 fn cube_and_cylinder_keep_their_planes_and_edges_with_few_faces() {
-    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
-    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
+    use tacmesh::sim::Shape;
     let mut failures = Vec::new();
     for (shape, faces_bound, mhe_bound) in
         [(Shape::Cube, 16, 0.00488), (Shape::Cylinder, 64, 0.00748)]
     {
-        let truth = shape.mesh();
         for seed in [31, 32] {
-            let cloud = sample_cloud(
-                &truth,
-                &SampleConfig {
-                    points: 40_000,
-                    noise_sigma_m: 0.02,
-                    seed,
-                },
-            )
-            .expect("samples");
-            let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
-            let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
-                .expect("measures")
-                .mhe_m;
+            let (report, mhe) = mesh_sampled_shape(shape, 40_000, 0.02, seed);
             let line = format!(
                 "{} seed {seed}: {} faces ({} after the first pass), closed {}, MHE {mhe:.5}",
                 shape.name(),
@@ -417,24 +417,9 @@ fn cube_and_cylinder_keep_their_planes_and_edges_with_few_faces() {
 /// coarser voxel rounds the edges more): the chamfers straighten only over several fits.
 #[test]
 fn the_cube_from_half_the_points_keeps_its_few_faces() {
-    use tacmesh::pipeline::{mesh_cloud, MeshConfig};
-    use tacmesh::sim::{mesh_distance, sample_cloud, SampleConfig, Shape};
-    let truth = Shape::Cube.mesh();
     let mut lines = Vec::new();
     let mut faces_at = |points: usize, seed: u64| {
-        let cloud = sample_cloud(
-            &truth,
-            &SampleConfig {
-                points,
-                noise_sigma_m: 0.02,
-                seed,
-            },
-        )
-        .expect("samples");
-        let (mesh, report) = mesh_cloud(&cloud, &MeshConfig::default()).expect("meshes");
-        let mhe = mesh_distance(&truth, &mesh, 20_000, 1)
-            .expect("measures")
-            .mhe_m;
+        let (report, mhe) = mesh_sampled_shape(tacmesh::sim::Shape::Cube, points, 0.02, seed);
         lines.push(format!(
             "{points} points, seed {seed}: {} faces ({} after the first pass), closed {}, \
              MHE {mhe:.5}",
