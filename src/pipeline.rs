@@ -108,8 +108,9 @@ pub const DEFAULT_RESIDUAL_OF_EXTENT: f32 = 0.025;
 
 /// Passes of simplification over the fitted mesh, each followed by a fit, at most (they stop
 /// early once a pass removes nothing). Measured on the paper's shapes, seeds 101-103: three
-/// against one, fewer faces or as many everywhere (the cube at 20,000 points 20 -> 14, the cone
-/// 34 -> 26 and the cylinder at 5,000 points 66 -> 48, both at 20 mm), the MHE within 0.9-1.1x
+/// against one (with three-iteration refits then), fewer faces or as many everywhere (the cube
+/// at 20,000 points 20 -> 14, the cone 34 -> 26 and the cylinder at 5,000 points 66 -> 48, both
+/// at 20 mm), the MHE within 0.9-1.1x
 /// at 20-30 mm (at 40 mm see [`MAX_UNHELD_PER_VERTEX`]); each pass costs 2-4 ms on a 1 m
 /// object, and its fit one iteration ([`REFIT_ITERATIONS`]).
 pub const REFINE_PASSES: usize = 3;
@@ -459,14 +460,12 @@ fn simplify_and_fit(
     fit_to_data: bool,
     viewpoint: Option<Vec3>,
 ) -> Result<(TriMesh, MeshReport), PipelineError> {
+    let simplify_config = SimplifyConfig {
+        max_residual_m,
+        ..SimplifyConfig::default()
+    };
     let simplify_start = Instant::now();
-    let (mut mesh, simplified) = simplify(
-        dense,
-        &SimplifyConfig {
-            max_residual_m,
-            ..SimplifyConfig::default()
-        },
-    )?;
+    let (mut mesh, simplified) = simplify(dense, &simplify_config)?;
     let first_pass_ms = simplify_start.elapsed().as_secs_f64() * 1e3;
     let mut simplify_ms = first_pass_ms;
 
@@ -505,14 +504,7 @@ fn simplify_and_fit(
         // not held (there is no face it could be held to); the report counts them.
         for _ in 0..REFINE_PASSES {
             let pass_start = Instant::now();
-            let (merged, pass) = simplify_near_points(
-                &mesh,
-                &dense.vertices,
-                &SimplifyConfig {
-                    max_residual_m,
-                    ..SimplifyConfig::default()
-                },
-            )?;
+            let (merged, pass) = simplify_near_points(&mesh, &dense.vertices, &simplify_config)?;
             last_pass = Some(pass);
             refine_ms += pass_start.elapsed().as_secs_f64() * 1e3;
             if merged.triangles.len() >= mesh.triangles.len() {
