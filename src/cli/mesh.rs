@@ -21,10 +21,16 @@ pub struct MeshArgs {
     /// Output mesh: .ply or .obj (a folder with --objects)
     #[arg(short, long)]
     output: PathBuf,
-    /// Marching-cubes voxel edge in metres, used as given [default: 1/50 of the cloud's largest
-    /// side, grown for noisy or sparse clouds (see the README)]
+    /// Voxel edge in metres: the points are fused and their planes fitted per voxel, used as
+    /// given [default: 1/50 of the cloud's largest side, grown for noisy or sparse clouds (see
+    /// the README)]
     #[arg(long)]
     voxel_m: Option<f32>,
+    /// Marching-cubes cell edge in voxels, 1 to 4 [default: 2 for a cloud with no viewpoint
+    /// while the cell stays within 6 % of its largest side, else 1; a closed object whose
+    /// coarser mesh comes out open is meshed again with 1]
+    #[arg(long, value_name = "VOXELS", value_parser = clap::value_parser!(i32).range(1..=4))]
+    mesh_step_voxels: Option<i32>,
     /// Residual bound in metres: how far simplification may move the surface [default: 2.5 % of
     /// the cloud's largest side]
     #[arg(long)]
@@ -171,8 +177,8 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The pipeline's settings from the defaults and `--voxel-m`, `--max-residual-m` and
-/// `--target-mhe-m` (one cloud and `--objects` alike).
+/// The pipeline's settings from the defaults and `--voxel-m`, `--mesh-step-voxels`,
+/// `--max-residual-m` and `--target-mhe-m` (one cloud and `--objects` alike).
 fn mesh_config(args: &MeshArgs, viewpoint: Option<Vec3>) -> MeshConfig {
     let mut config = MeshConfig {
         viewpoint,
@@ -181,6 +187,7 @@ fn mesh_config(args: &MeshArgs, viewpoint: Option<Vec3>) -> MeshConfig {
     if let Some(v) = args.voxel_m {
         config.voxel_size = Length::Metres(v);
     }
+    config.mesh_step_voxels = args.mesh_step_voxels;
     if let Some(r) = args.max_residual_m {
         config.max_residual = Length::Metres(r);
     }

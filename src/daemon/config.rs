@@ -285,6 +285,9 @@ pub struct MeshSection {
     pub max_residual_m: f32,
     /// Fit the simplified vertices to the fused data (restores corners). Default true.
     pub fit_to_data: bool,
+    /// Marching-cubes cell edge in voxels of `track.voxel_size_m`: 2 samples the signed
+    /// distance on every second voxel corner, for a quarter of the faces to simplify. Default 1.
+    pub mesh_step_voxels: i32,
     /// Threads meshing objects side by side. Default 2: when several objects change at
     /// once, the second keeps their new meshes from queueing behind each other.
     pub workers: usize,
@@ -295,6 +298,7 @@ impl Default for MeshSection {
         Self {
             max_residual_m: 0.004,
             fit_to_data: true,
+            mesh_step_voxels: 1,
             workers: 2,
         }
     }
@@ -466,6 +470,13 @@ impl DaemonConfig {
                 key: "pipeline.ring_capacity",
                 value: self.pipeline.ring_capacity.to_string(),
                 expected: "1 to 64 frames",
+            });
+        }
+        if !(1..=4).contains(&self.mesh.mesh_step_voxels) {
+            return Err(ConfigError::OutOfRange {
+                key: "mesh.mesh_step_voxels",
+                value: self.mesh.mesh_step_voxels.to_string(),
+                expected: "1 to 4 voxels",
             });
         }
         if !(1..=16).contains(&self.mesh.workers) {
@@ -674,6 +685,10 @@ const KEY_WANTS: &[(&str, &str)] = &[
         "a length in metres, for example 0.004",
     ),
     ("mesh.fit_to_data", "true or false"),
+    (
+        "mesh.mesh_step_voxels",
+        "a whole number of voxels from 1 to 4, for example 2",
+    ),
     (
         "mesh.workers",
         "a whole number of threads from 1 to 16, for example 2",

@@ -54,6 +54,7 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         Some(job.viewpoint_in_object),
         shared.config.mesh.max_residual_m,
         shared.config.mesh.fit_to_data,
+        shared.config.mesh.mesh_step_voxels,
     );
     Counters::add(&counters.meshing_runs, 1);
     let (mesh, report) = match result {
