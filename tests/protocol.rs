@@ -56,17 +56,6 @@ fn centroid(mesh: &TriMesh) -> Vec3 {
     mesh.vertices.iter().copied().sum::<Vec3>() / mesh.vertices.len().max(1) as f32
 }
 
-fn is_closed(mesh: &TriMesh) -> bool {
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
-    }
-    !edges.is_empty() && edges.values().all(|&n| n == 2)
-}
-
 fn realtime_now_ns() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -497,7 +486,7 @@ fn check_supports_and_closed_flags(read: &Read1) {
             if !shape.is_support() {
                 assert_eq!(
                     shape.is_closed(),
-                    is_closed(&shape.mesh),
+                    shape.mesh.is_closed(),
                     "object {}",
                     shape.object_id()
                 );

@@ -77,21 +77,6 @@ fn nanos(time: Duration) -> u64 {
     time.as_nanos().min(u64::MAX as u128) as u64
 }
 
-/// Whether every edge of `mesh` is shared by exactly two triangles.
-fn is_closed(mesh: &TriMesh) -> bool {
-    if mesh.triangles.is_empty() {
-        return false;
-    }
-    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3);
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
-    }
-    edges.values().all(|&n| n == 2)
-}
-
 impl Board {
     /// A new object seen first at `capture_time` (nothing is published until it has a mesh).
     pub fn create(&mut self, id: u64, world_from_object: Affine3A, capture_time: Duration) {
@@ -226,7 +211,7 @@ impl Board {
         let entry = self.entries.get_mut(&id)?;
         entry.shape_time = entry.shape_time.max(capture_time);
         entry.mesh = Some(Published {
-            closed: is_closed(&mesh_in_object),
+            closed: mesh_in_object.is_closed(),
             mesh_in_object,
             stats,
         });
@@ -422,21 +407,6 @@ mod tests {
         }
         assert_eq!(entry.shape_version, 0, "nothing published");
         assert!(entry.frame_changed, "the next publication must be a shape");
-    }
-
-    #[test]
-    fn a_closed_mesh_is_told_from_an_open_one() {
-        let tetrahedron = TriMesh::new(
-            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
-            vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
-        );
-        assert!(is_closed(&tetrahedron));
-        let open = TriMesh::new(
-            tetrahedron.vertices.clone(),
-            tetrahedron.triangles[..3].to_vec(),
-        );
-        assert!(!is_closed(&open));
-        assert!(!is_closed(&TriMesh::default()));
     }
 
     /// A move's velocity is the change from the pose before over the time between them; an

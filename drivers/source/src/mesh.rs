@@ -83,6 +83,28 @@ impl TriMesh {
         (piece_of_face, pieces as usize)
     }
 
+    /// How many faces use each undirected edge, one count per edge (in no meaningful order).
+    fn edge_uses(&self) -> Vec<usize> {
+        let mut edges: Vec<u64> = self
+            .triangles
+            .iter()
+            .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(|(u, v)| u64::from(u.min(v)) << 32 | u64::from(u.max(v)))
+            .collect();
+        edges.sort_unstable();
+        edges.chunk_by(|x, y| x == y).map(<[u64]>::len).collect()
+    }
+
+    /// Whether the mesh has faces and every edge is shared by exactly two of them.
+    pub fn is_closed(&self) -> bool {
+        !self.triangles.is_empty() && self.edge_uses().iter().all(|&n| n == 2)
+    }
+
+    /// Whether some edge is used by one face only: a hole or a rim.
+    pub fn has_open_edge(&self) -> bool {
+        self.edge_uses().contains(&1)
+    }
+
     /// The first triangle whose index points past the vertex list, if any.
     pub fn first_bad_index(&self) -> Option<(usize, u32)> {
         let n = self.vertices.len() as u32;
@@ -108,6 +130,29 @@ mod tests {
     fn unit_right_triangle_has_half_area() {
         let mesh = TriMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
         assert!((mesh.area() - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_closed_mesh_is_told_from_an_open_one() {
+        let tetrahedron = TriMesh::new(
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
+            vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+        );
+        assert!(tetrahedron.is_closed() && !tetrahedron.has_open_edge());
+        let open = TriMesh::new(
+            tetrahedron.vertices.clone(),
+            tetrahedron.triangles[..3].to_vec(),
+        );
+        assert!(!open.is_closed() && open.has_open_edge());
+        // An edge of four faces (two tetrahedra on one edge) is neither open nor closed.
+        let mut bowtie = tetrahedron.clone();
+        bowtie
+            .vertices
+            .extend([Vec3::new(0.0, 0.0, -1.0), Vec3::new(1.0, 1.0, -1.0)]);
+        bowtie.triangles.extend([[0, 4, 1], [0, 5, 4]]);
+        bowtie.triangles.extend([[1, 4, 5], [0, 1, 5]]);
+        assert!(!bowtie.is_closed() && !bowtie.has_open_edge());
+        assert!(!TriMesh::default().is_closed() && !TriMesh::default().has_open_edge());
     }
 
     #[test]
