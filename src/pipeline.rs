@@ -59,7 +59,8 @@ pub struct MeshConfig {
     pub adapt_to_data: bool,
     /// Marching-cubes cell edge in voxels (the signed distance is sampled on every this-many
     /// voxel corner); `None` picks [`MESH_STEP_VOXELS`] for a cloud with no viewpoint when the
-    /// cell stays within [`MAX_MESH_CELL_OF_EXTENT`] of the extent, else 1.
+    /// cell stays within [`MAX_MESH_CELL_OF_EXTENT`] of the extent or the noise dominates
+    /// ([`noise_dominates`]), else 1.
     pub mesh_step_voxels: Option<i32>,
 }
 
@@ -128,8 +129,28 @@ pub const MESH_STEP_VOXELS: i32 = 2;
 /// is already grown (up to [`MAX_DENSITY_VOXEL_GROWTH`] times the default), and doubling that
 /// cost faces and error at 5,000 points (seeds 101-103: cube at 20 mm 28 -> 36 faces and 3.9
 /// -> 4.2 mm, cone at 0 mm 34 -> 50 faces). The noise alone (at most
-/// [`MAX_NOISE_VOXEL_GROWTH`] times the default) stays within it.
+/// [`MAX_NOISE_VOXEL_GROWTH`] times the default) stays within it. A noisy cloud is the
+/// exception: see [`noise_dominates`].
 pub const MAX_MESH_CELL_OF_EXTENT: f32 = 0.06;
+
+/// Whether a cloud's noise (σ, as [`estimate_noise_m`] finds it) reaches the default voxel
+/// `base_voxel_m`: the noise has then grown the voxel to its cap
+/// ([`NOISE_VOXEL_RATIO`] and [`MAX_NOISE_VOXEL_GROWTH`] are both 1.4) and the surface the
+/// points give is no sharper than the coarser marching-cubes cell, so the coarser mesh is used
+/// however sparse the cloud ([`MAX_MESH_CELL_OF_EXTENT`] does not apply). Measured on the six
+/// shapes at 0-40 mm noise and 5,000-20,000 points, seeds 101-103, each meshed with
+/// [`MeshConfig::mesh_step_voxels`] forced to 2 and left to the rules: at 40 mm noise (σ
+/// estimated 26-34 mm on 1 m shapes) every corner left the noise as bumps (cone at 5,000
+/// points 106-172 faces and 10.2-11.3 mm, cube at 10,000 68-100 faces) where every second
+/// corner gave 62-70 faces and 9.1-10.1 mm, and 46-58; at 30 mm (σ 21-24 mm) fewer faces
+/// too (cone at 5,000 points 52-70 -> 40-50), MHE within 0.8-1.2x. At 20 mm (σ 16-17.5 mm,
+/// under the cone's 18 mm and the cube's 22 mm default voxels) and below it cost faces and
+/// error (cube at 5,000 points and 10 mm: 38-44 -> 44 faces, 3.6-4.2 -> 7.6-8.1 mm), and the
+/// rule leaves every one of those clouds as it was. Monkey and torus were not changed: the
+/// monkey's coarser mesh at 40 mm and 5,000 points comes out open and is made again.
+pub fn noise_dominates(noise_m: f32, base_voxel_m: f32) -> bool {
+    noise_m >= base_voxel_m
+}
 /// Default residual bound: 2.5 % of the object's extent (25 mm for a 1 m object).
 pub const DEFAULT_RESIDUAL_OF_EXTENT: f32 = 0.025;
 
@@ -406,7 +427,8 @@ pub fn mesh_cloud_with_dense(
         _ => base_voxel_m,
     };
     let max_residual_m = config.max_residual.resolve_m(extent_m);
-    let coarse_fits = MESH_STEP_VOXELS as f32 * voxel_size_m <= MAX_MESH_CELL_OF_EXTENT * extent_m;
+    let coarse_fits = noise_dominates(noise_m, base_voxel_m)
+        || MESH_STEP_VOXELS as f32 * voxel_size_m <= MAX_MESH_CELL_OF_EXTENT * extent_m;
     let mesh_step_voxels =
         config
             .mesh_step_voxels

@@ -380,6 +380,51 @@ fn high_noise_and_sparse_clouds_close_with_few_faces() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// Issue 14's noise and sparsity together, on seeds the tuning did not see: at 40 mm noise
+/// from 5,000 points the cone, cube, cylinder and sphere come out as one closed piece with no
+/// more faces than Table 1 gives at 20 mm and dense clouds, on the coarser marching-cubes grid
+/// ([`tacmesh::pipeline::noise_dominates`]), and within twice Table 1's error (the cube's
+/// 6.5-9.3 mm misses Table 1's 4.88 mm on these seeds). Meshed on every voxel corner the noise
+/// stayed as bumps: cone 120-146 faces on seeds 41-43.
+#[test]
+fn noisy_sparse_clouds_close_with_few_faces_on_the_coarser_grid() {
+    use tacmesh::sim::Shape;
+    // (shape, Table 1's faces, Table 1's MHE in metres)
+    let table1 = [
+        (Shape::Cone, 104, 0.00887),
+        (Shape::Cube, 118, 0.00488),
+        (Shape::Cylinder, 158, 0.00748),
+        (Shape::Sphere, 116, 0.0111),
+    ];
+    let mut failures = Vec::new();
+    for (shape, faces_bound, mhe_bound) in table1 {
+        for seed in [41, 42] {
+            let (report, mhe) = mesh_sampled_shape(shape, 5_000, 0.04, seed);
+            let line = format!(
+                "{} seed {seed}: {} faces (marching-cubes step {}), {} pieces, closed {}, \
+                 MHE {mhe:.5} (noise {:.1} mm, voxel {:.1} mm)",
+                shape.name(),
+                report.faces,
+                report.mesh_step_voxels,
+                report.pieces,
+                report.closed,
+                report.noise_m * 1e3,
+                report.voxel_size_m * 1e3,
+            );
+            println!("{line}");
+            if !(report.mesh_step_voxels == 2
+                && report.closed
+                && report.pieces == 1
+                && report.faces <= faces_bound
+                && mhe <= 2.0 * mhe_bound)
+            {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
 /// Issue 14's planes and sharp features, on seeds the tuning did not see (20 mm noise, 40,000
 /// points): the cube comes out with at most 16 faces (its true 12 plus a corner's worth) and
 /// the cylinder with at most 64, both closed and within Table 1's error. Before the second

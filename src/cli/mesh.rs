@@ -27,7 +27,8 @@ pub struct MeshArgs {
     #[arg(long)]
     voxel_m: Option<f32>,
     /// Marching-cubes cell edge in voxels, 1 to 4 [default: 2 for a cloud with no viewpoint
-    /// while the cell stays within 6 % of its largest side, else 1; a closed object whose
+    /// while the cell stays within 6 % of its largest side or the noise reaches the default
+    /// voxel, else 1; a closed object whose
     /// coarser mesh comes out open is meshed again with 1]
     #[arg(long, value_name = "VOXELS", value_parser = clap::value_parser!(i32).range(1..=4))]
     mesh_step_voxels: Option<i32>,
