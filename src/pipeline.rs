@@ -151,11 +151,12 @@ pub const MAX_MESH_CELL_OF_EXTENT: f32 = 0.06;
 pub fn noise_dominates(noise_m: f32, base_voxel_m: f32) -> bool {
     noise_m >= base_voxel_m
 }
+
 /// When a closed object's mesh comes out open or in pieces, it is made again on the other
 /// marching-cubes step and then, when the noise or the spacing had grown the voxel, with the
 /// voxel this many times larger (on every second corner), in this order; the first mesh that
-/// is one closed piece is kept, and when none is the first mesh stays. Measured at 40 mm noise from 5,000 points, seeds 101-103:
-/// Suzanne's ears (open at 24 mm on seed 102: 523 faces) close at 1.4x (90 faces) but not at
+/// is one closed piece is kept, and when none is the first mesh stays. Measured at 40 mm
+/// noise from 5,000 points, seeds 101-103: Suzanne's ears (open at 24 mm on seed 102: 523 faces) close at 1.4x (90 faces) but not at
 /// 1.2x, the torus (open at 27 mm on seed 103) closes at 1.2x (76 faces, 11.3 mm for
 /// 13.1) while at 1.3x its 20 cm tube opens on every seed. Clouds that come out closed are
 /// never remeshed; an open scan with no viewpoint pays for up to three tries more.
@@ -257,8 +258,8 @@ pub struct MeshReport {
     pub closed: bool,
     /// Meshes made again because a closed object's came out open or in pieces (on the other
     /// marching-cubes step or a larger voxel, [`LARGER_VOXEL_RETRIES`]); 0 when the first
-    /// was one closed piece or there was a viewpoint. `voxel_size_m` and `mesh_step_voxels` are the kept
-    /// mesh's.
+    /// was one closed piece or there was a viewpoint. `voxel_size_m` and `mesh_step_voxels`
+    /// are the kept mesh's.
     pub closing_retries: usize,
     pub volume_m3: f64,
     pub total_ms: f64,
@@ -476,15 +477,10 @@ pub fn mesh_cloud_with_dense(
         report.points = recon.points;
         report.extent_m = extent_m;
         report.voxel_size_m = voxel_size_m;
-        report.mesh_step_voxels = recon.mesh_step_voxels;
         report.noise_m = noise_m;
         report.spacing_m = spacing_m;
-        report.recon_faces = recon.faces;
         report.integrate_ms = recon.integrate_ms;
-        report.normals_ms = recon.normals_ms;
-        report.orient_ms = recon.orient_ms;
-        report.distance_ms = recon.distance_ms;
-        report.marching_cubes_ms = recon.marching_cubes_ms;
+        report.take_meshing_figures(&recon);
         Ok::<_, PipelineError>((dense, mesh, report))
     };
     let mut meshed = attempt(voxel_size_m, mesh_step_voxels)?;
@@ -530,6 +526,19 @@ pub fn mesh_cloud_with_dense(
     Ok(meshed)
 }
 
+impl MeshReport {
+    /// The step, face count and stage times of reconstruction from the moment grid on (both
+    /// [`mesh_cloud`] and [`mesh_fused_grid`] report them; integration is the cloud's alone).
+    fn take_meshing_figures(&mut self, recon: &tacmesh_reconstruct::surface::ReconstructReport) {
+        self.mesh_step_voxels = recon.mesh_step_voxels;
+        self.recon_faces = recon.faces;
+        self.normals_ms = recon.normals_ms;
+        self.orient_ms = recon.orient_ms;
+        self.distance_ms = recon.distance_ms;
+        self.marching_cubes_ms = recon.marching_cubes_ms;
+    }
+}
+
 /// Meshes an already fused moment grid (the daemon's per-object state) in its own frame: the
 /// same stages as [`mesh_cloud`] after integration. `viewpoint` is the sensor position in the
 /// grid's frame, when all the data came from one side; `None` orients by propagation.
@@ -560,12 +569,7 @@ pub fn mesh_fused_grid(
         .map(|m| m.count as usize)
         .sum();
     report.voxel_size_m = grid.voxel_size_m();
-    report.mesh_step_voxels = recon.mesh_step_voxels;
-    report.recon_faces = recon.faces;
-    report.normals_ms = recon.normals_ms;
-    report.orient_ms = recon.orient_ms;
-    report.distance_ms = recon.distance_ms;
-    report.marching_cubes_ms = recon.marching_cubes_ms;
+    report.take_meshing_figures(&recon);
     report.total_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok((mesh, report))
 }
