@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use crate::cell_planes::CellPlane;
-use crate::sparse_sdf::{local_index, SdfBlock, SparseSdf, BLOCK_EDGE};
+use crate::sparse_sdf::{local_index, SdfBlock, SparseSdf, BLOCK_EDGE, BLOCK_VOXELS};
 
 /// Settings of the signed distance, with units in the names.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,7 +60,7 @@ fn planes_by_window(planes: &[CellPlane], band: i32, step: i32) -> Vec<(IVec3, V
     windows
 }
 
-/// A plane as the corner loop reads it; `weight == 0` marks a voxel with none.
+/// A plane as the corner loop reads it.
 #[derive(Clone, Copy)]
 struct WindowPlane {
     point: Vec3,
@@ -71,13 +71,6 @@ struct WindowPlane {
 }
 
 impl WindowPlane {
-    const EMPTY: Self = Self {
-        point: Vec3::ZERO,
-        normal: Vec3::ZERO,
-        offset_m: 0.0,
-        weight: 0.0,
-    };
-
     fn new(plane: &CellPlane) -> Self {
         Self {
             point: plane.point,
@@ -91,12 +84,18 @@ impl WindowPlane {
     }
 }
 
-/// Evaluates one block's corners from a dense window of the planes around it.
+/// Evaluates one block's corners by spreading each plane of its window onto the corners it
+/// reaches.
 ///
-/// The kernel is `(1 − d²/h²)²` inside `h` (Wendland-like, compact and cheaper than a
-/// Gaussian), `h = kernel_width_voxels · voxel`; planes farther than `h` from a corner do not
-/// count, and a corner with none stays unknown. A summed-volume table of plane counts lets a
-/// corner with no plane in its window be skipped without reading the window.
+/// A corner at voxel index `c` (per axis) averages the planes of the voxels `[c − band, c +
+/// band)` whose point lies within `h` of it, `h = kernel_width_voxels · voxel`, with the kernel
+/// `(1 − d²/h²)²` (Wendland-like, compact and cheaper than a Gaussian); a corner with none stays
+/// unknown. Written as a scatter rather than a gather over each corner's window: the surface
+/// fills about a sixth of a corner's `(2 · band)³` window, and the gather read every empty
+/// voxel of it (and zeroed a dense copy of the window per block), which made this the
+/// pipeline's largest stage. `in_window` is in the planes' order, sorted by cell (z, y, x) as
+/// [`crate::cell_planes`] makes them, so each corner adds its planes in the order the gather
+/// did and the values are the same to the bit.
 fn evaluate_block(
     key: IVec3,
     planes: &[CellPlane],
@@ -106,87 +105,49 @@ fn evaluate_block(
 ) -> Option<SdfBlock> {
     let band = config.band_voxels;
     let step = config.corner_step;
-    let window = BLOCK_EDGE * step + 2 * band;
-    let window_min = key * BLOCK_EDGE * step - IVec3::splat(band);
-    let at = |x: i32, y: i32, z: i32| (x + window * (y + window * z)) as usize;
-    // The window's planes copied next to each other: the corner loop below reads each one up to
-    // 64 times, and chasing indices into the global plane list was the stage's main cost.
-    let mut dense: Vec<WindowPlane> = vec![WindowPlane::EMPTY; (window * window * window) as usize];
-    // counts[(x+1, y+1, z+1)] = planes in window cells [0, x] × [0, y] × [0, z].
-    let side = window + 1;
-    let at_count = |x: i32, y: i32, z: i32| (x + side * (y + side * z)) as usize;
-    let mut counts = vec![0u32; (side * side * side) as usize];
-    for &i in in_window {
-        let plane = &planes[i as usize];
-        let w = plane.cell - window_min;
-        dense[at(w.x, w.y, w.z)] = WindowPlane::new(plane);
-    }
-    let mut any = false;
-    for z in 0..window {
-        for y in 0..window {
-            for x in 0..window {
-                let here = u32::from(dense[at(x, y, z)].weight > 0.0);
-                any |= here > 0;
-                counts[at_count(x + 1, y + 1, z + 1)] = here
-                    + counts[at_count(x, y + 1, z + 1)]
-                    + counts[at_count(x + 1, y, z + 1)]
-                    + counts[at_count(x + 1, y + 1, z)]
-                    + counts[at_count(x, y, z)]
-                    - counts[at_count(x, y, z + 1)]
-                    - counts[at_count(x, y + 1, z)]
-                    - counts[at_count(x + 1, y, z)];
-            }
-        }
-    }
-    if !any {
-        return None;
-    }
     let voxel = config.voxel_size_m;
     let width_sq = (config.kernel_width_voxels * voxel).powi(2);
     let inv_width_sq = 1.0 / width_sq;
-    let reach = 2 * band;
-    let mut block = SdfBlock::default();
-    let mut known = false;
-    for z in 0..BLOCK_EDGE {
-        for y in 0..BLOCK_EDGE {
-            for x in 0..BLOCK_EDGE {
-                // Window cells [x0, x0+reach) × ... hold the voxels within `band` of the
-                // corner, which sits `band` voxels into the window past voxel x0 = x · step.
-                let (x0, y0, z0) = (x * step, y * step, z * step);
-                let (x1, y1, z1) = (x0 + reach, y0 + reach, z0 + reach);
-                let in_window = counts[at_count(x1, y1, z1)] + counts[at_count(x0, y0, z1)]
-                    - counts[at_count(x0, y1, z1)]
-                    - counts[at_count(x1, y0, z1)]
-                    + counts[at_count(x1, y0, z0)]
-                    + counts[at_count(x0, y1, z0)]
-                    - counts[at_count(x0, y0, z0)]
-                    - counts[at_count(x1, y1, z0)];
-                if in_window == 0 {
-                    continue;
-                }
-                let local = IVec3::new(x, y, z);
-                let corner = origin + ((key * BLOCK_EDGE + local) * step).as_vec3() * voxel;
-                let (mut sum, mut weight) = (0.0f32, 0.0f32);
-                for wz in z0..z1 {
-                    for wy in y0..y1 {
-                        for wx in x0..x1 {
-                            let plane = &dense[at(wx, wy, wz)];
-                            let d_sq = (corner - plane.point).length_squared();
-                            if plane.weight == 0.0 || d_sq >= width_sq {
-                                continue;
-                            }
-                            let falloff = 1.0 - d_sq * inv_width_sq;
-                            let w = plane.weight * falloff * falloff;
-                            sum += w * (plane.normal.dot(corner) - plane.offset_m);
-                            weight += w;
-                        }
+    let first_corner = key * BLOCK_EDGE;
+    let last_local = IVec3::splat(BLOCK_EDGE - 1);
+    let mut sums = [0.0f32; BLOCK_VOXELS];
+    let mut weights = [0.0f32; BLOCK_VOXELS];
+    for &i in in_window {
+        let plane = WindowPlane::new(&planes[i as usize]);
+        if plane.weight == 0.0 {
+            continue;
+        }
+        let cell = planes[i as usize].cell;
+        // Corners whose voxel index c = corner · step has cell in [c − band, c + band), that is
+        // c in [cell − band + 1, cell + band]; as corner indices local to the block, clipped.
+        let lowest = -(-(cell - IVec3::splat(band - 1))).div_euclid(IVec3::splat(step));
+        let highest = (cell + IVec3::splat(band)).div_euclid(IVec3::splat(step));
+        let lo = (lowest - first_corner).max(IVec3::ZERO);
+        let hi = (highest - first_corner).min(last_local);
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    let local = IVec3::new(x, y, z);
+                    let corner = origin + ((first_corner + local) * step).as_vec3() * voxel;
+                    let d_sq = (corner - plane.point).length_squared();
+                    if d_sq >= width_sq {
+                        continue;
                     }
-                }
-                if weight > 0.0 {
-                    block.values_m[local_index(local)] = sum / weight;
-                    known = true;
+                    let falloff = 1.0 - d_sq * inv_width_sq;
+                    let w = plane.weight * falloff * falloff;
+                    let at = local_index(local);
+                    sums[at] += w * (plane.normal.dot(corner) - plane.offset_m);
+                    weights[at] += w;
                 }
             }
+        }
+    }
+    let mut block = SdfBlock::default();
+    let mut known = false;
+    for ((value, &sum), &weight) in block.values_m.iter_mut().zip(&sums).zip(&weights) {
+        if weight > 0.0 {
+            *value = sum / weight;
+            known = true;
         }
     }
     known.then_some(block)
