@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use tacmesh_source::TriMesh;
 
 use crate::point_triangle::TriangleQuery;
-use crate::triangle_grid::TriangleGrid;
+use crate::triangle_grid::PointCells;
 
 /// A data point with a weight (for a voxel centroid: the number of points it stands for).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,24 +63,28 @@ struct Assignment {
     distance_sq_m2: f32,
 }
 
-fn assign(mesh: &TriMesh, samples: &[WeightedSample], reject_m: f32) -> Vec<Option<Assignment>> {
+/// Each sample's nearest triangle within `reject_m` (the cell size of `cells`, which holds the
+/// samples' cells).
+fn assign(
+    mesh: &TriMesh,
+    samples: &[WeightedSample],
+    cells: &PointCells,
+    reject_m: f32,
+) -> Vec<Option<Assignment>> {
     let queries: Vec<TriangleQuery> = (0..mesh.triangles.len())
         .map(|t| {
             let [a, b, c] = mesh.corners(t);
             TriangleQuery::new(a, b, c)
         })
         .collect();
-    let grid = TriangleGrid::new(
-        (0..mesh.triangles.len()).map(|t| mesh.corners(t)),
-        samples.iter().map(|s| s.point),
-        reject_m,
-    );
+    let lists = cells.bucket((0..mesh.triangles.len()).map(|t| mesh.corners(t)));
     let reject_sq = reject_m * reject_m;
     samples
         .par_iter()
-        .map(|s| {
+        .enumerate()
+        .map(|(i, s)| {
             let mut best: Option<Assignment> = None;
-            for &t in grid.near(s.point) {
+            for &t in cells.near_point(&lists, i) {
                 let (d_sq, [beta, gamma]) = queries[t as usize].closest(s.point);
                 if d_sq < best.as_ref().map_or(reject_sq, |b| b.distance_sq_m2) {
                     best = Some(Assignment {
@@ -166,9 +170,11 @@ pub fn fit_to_samples(
         }
     }
     let start = mesh.vertices.clone();
+    // The samples stay where they are; only the mesh moves between iterations.
+    let cells = PointCells::new(samples.iter().map(|s| s.point), config.reject_m);
 
     for iteration in 0..config.iterations {
-        let assignments = assign(mesh, samples, config.reject_m);
+        let assignments = assign(mesh, samples, &cells, config.reject_m);
         let (rms, used) = weighted_rms(samples, &assignments);
         if iteration == 0 {
             report.rms_before_m = rms;
@@ -240,7 +246,7 @@ pub fn fit_to_samples(
             }
         }
     }
-    let assignments = assign(mesh, samples, config.reject_m);
+    let assignments = assign(mesh, samples, &cells, config.reject_m);
     report.rms_after_m = weighted_rms(samples, &assignments).0;
     report.max_move_m = mesh
         .vertices
@@ -336,17 +342,14 @@ mod tests {
             .iter()
             .map(|&point| WeightedSample { point, weight: 1.0 })
             .collect();
-        let grid = TriangleGrid::new(
-            (0..mesh.triangles.len()).map(|t| mesh.corners(t)),
-            samples.iter().map(|s| s.point),
-            0.0025,
-        );
+        let cells = PointCells::new(samples.iter().map(|s| s.point), 0.0025);
+        let lists = cells.bucket((0..mesh.triangles.len()).map(|t| mesh.corners(t)));
         assert!(
-            grid.lists.len() <= samples.len(),
+            cells.cell_count() <= samples.len(),
             "{} cells",
-            grid.lists.len()
+            cells.cell_count()
         );
-        assert!(grid.lists.iter().all(|triangles| !triangles.is_empty()));
+        assert!((0..samples.len()).all(|i| !cells.near_point(&lists, i).is_empty()));
         let report = fit_to_samples(
             &mut mesh,
             &samples,

@@ -19,15 +19,9 @@ use rustc_hash::FxHashMap;
 /// box and plane, with no hashing. The plane test keeps a large face out of the cells its box
 /// only grazes: fewer exact distances for the queries.
 pub(crate) struct TriangleGrid {
-    cell_m: f32,
-    /// Occupied cell -> index into `lists`.
-    index: FxHashMap<IVec3, u32>,
-    pub(crate) lists: Vec<Vec<u32>>,
+    cells: PointCells,
+    lists: CellLists,
 }
-
-/// A triangle's grown box spanning at most this many cells walks them; a larger one is tested
-/// against every occupied cell.
-const MAX_WALKED_CELLS: i64 = 64;
 
 impl TriangleGrid {
     /// `triangles` gives the corners of each triangle in order; `points` are where
@@ -38,17 +32,92 @@ impl TriangleGrid {
         points: impl Iterator<Item = Vec3>,
         cell_m: f32,
     ) -> Self {
-        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
+        let cells = PointCells::new(points, cell_m);
+        let lists = cells.bucket(triangles);
+        Self { cells, lists }
+    }
+
+    /// The triangles that can be within `cell_m` of `p` (a superset of them), ascending.
+    pub(crate) fn near(&self, p: Vec3) -> &[u32] {
+        self.cells.near(&self.lists, p)
+    }
+}
+
+/// The occupied cells of a fixed set of query points, found once and then bucketed against
+/// mesh after mesh (the fit moves the same mesh's vertices and asks again for the same
+/// samples): hashing every sample on every iteration was over half of the fit's time.
+pub(crate) struct PointCells {
+    cell_m: f32,
+    /// Occupied cell -> its slot in `occupied` (and in a [`CellLists`]).
+    index: FxHashMap<IVec3, u32>,
+    occupied: Vec<IVec3>,
+    /// The slot of each query point's cell, in the order the points were given; `NO_CELL` for
+    /// a non-finite point.
+    slot_of_point: Vec<u32>,
+}
+
+/// The triangles listed per occupied cell of a [`PointCells`], all in one array.
+pub(crate) struct CellLists {
+    /// Cell slot `s` lists `triangles[start[s]..start[s + 1]]`.
+    start: Vec<u32>,
+    triangles: Vec<u32>,
+}
+
+impl CellLists {
+    /// The triangles listed in cell slot `slot`, ascending.
+    pub(crate) fn of_slot(&self, slot: u32) -> &[u32] {
+        let slot = slot as usize;
+        match (self.start.get(slot), self.start.get(slot + 1)) {
+            (Some(&from), Some(&to)) => &self.triangles[from as usize..to as usize],
+            _ => &[],
+        }
+    }
+}
+
+const NO_CELL: u32 = u32::MAX;
+
+/// A triangle's grown box spanning at most this many cells walks them; a larger one is tested
+/// against every occupied cell.
+const MAX_WALKED_CELLS: i64 = 64;
+
+impl PointCells {
+    /// The cells of `points` (non-finite ones have none). `cell_m` must be positive.
+    pub(crate) fn new(points: impl Iterator<Item = Vec3>, cell_m: f32) -> Self {
         let mut index: FxHashMap<IVec3, u32> = FxHashMap::default();
         let mut occupied: Vec<IVec3> = Vec::new();
-        for p in points.filter(|p| p.is_finite()) {
-            let cell = cell_of(p);
-            index.entry(cell).or_insert_with(|| {
-                occupied.push(cell);
-                (occupied.len() - 1) as u32
-            });
+        let slot_of_point = points
+            .map(|p| {
+                if !p.is_finite() {
+                    return NO_CELL;
+                }
+                let cell = (p / cell_m).floor().as_ivec3();
+                *index.entry(cell).or_insert_with(|| {
+                    occupied.push(cell);
+                    (occupied.len() - 1) as u32
+                })
+            })
+            .collect();
+        Self {
+            cell_m,
+            index,
+            occupied,
+            slot_of_point,
         }
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); occupied.len()];
+    }
+
+    #[cfg(test)]
+    pub(crate) fn cell_count(&self) -> usize {
+        self.occupied.len()
+    }
+
+    /// Lists each triangle in the occupied cells it can be within `cell_m` of (see
+    /// [`TriangleGrid`]).
+    pub(crate) fn bucket(&self, triangles: impl Iterator<Item = [Vec3; 3]>) -> CellLists {
+        let cell_m = self.cell_m;
+        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
+        // (cell slot, triangle), in triangle order; sorted by slot below, stably, so that each
+        // cell lists its triangles in ascending order.
+        let mut pairs: Vec<(u32, u32)> = Vec::new();
         // A point within `cell_m` of the triangle is within `cell_m` of its plane, and the
         // cell's centre within half the diagonal of the point; a little more for rounding,
         // relative to the cell and to how far from the origin it is.
@@ -56,6 +125,7 @@ impl TriangleGrid {
         let centre_of = |cell: IVec3| (cell.as_vec3() + 0.5) * cell_m;
         let rounding = |centre: Vec3| 16.0 * f32::EPSILON * centre.abs().max_element();
         for (t, [a, b, c]) in triangles.enumerate() {
+            let t = t as u32;
             let normal = (b - a).cross(c - a).normalize_or_zero();
             let near_plane = |cell: IVec3| {
                 let centre = centre_of(cell);
@@ -70,35 +140,57 @@ impl TriangleGrid {
                     for y in lo.y..=hi.y {
                         for x in lo.x..=hi.x {
                             let cell = IVec3::new(x, y, z);
-                            if let Some(&i) = index.get(&cell) {
+                            if let Some(&slot) = self.index.get(&cell) {
                                 if near_plane(cell) {
-                                    lists[i as usize].push(t as u32);
+                                    pairs.push((slot, t));
                                 }
                             }
                         }
                     }
                 }
             } else {
-                for (i, &cell) in occupied.iter().enumerate() {
+                for (slot, &cell) in self.occupied.iter().enumerate() {
                     if cell.cmpge(lo).all() && cell.cmple(hi).all() && near_plane(cell) {
-                        lists[i].push(t as u32);
+                        pairs.push((slot as u32, t));
                     }
                 }
             }
         }
-        Self {
-            cell_m,
-            index,
-            lists,
+        let mut start = vec![0u32; self.occupied.len() + 1];
+        for &(slot, _) in &pairs {
+            start[slot as usize + 1] += 1;
+        }
+        for s in 1..start.len() {
+            start[s] += start[s - 1];
+        }
+        let mut next = start.clone();
+        let mut listed = vec![0u32; pairs.len()];
+        for &(slot, t) in &pairs {
+            listed[next[slot as usize] as usize] = t;
+            next[slot as usize] += 1;
+        }
+        CellLists {
+            start,
+            triangles: listed,
         }
     }
 
-    /// The triangles that can be within `cell_m` of `p` (a superset of them), ascending.
-    pub(crate) fn near(&self, p: Vec3) -> &[u32] {
+    /// The triangles of `lists` that can be within `cell_m` of `p` (a superset of them),
+    /// ascending.
+    pub(crate) fn near<'l>(&self, lists: &'l CellLists, p: Vec3) -> &'l [u32] {
         let cell = (p / self.cell_m).floor().as_ivec3();
         self.index
             .get(&cell)
-            .map_or(&[], |&i| self.lists[i as usize].as_slice())
+            .map_or(&[], |&slot| lists.of_slot(slot))
+    }
+
+    /// As [`PointCells::near`] for the `i`-th of the points the cells were made from, without
+    /// finding its cell again.
+    pub(crate) fn near_point<'l>(&self, lists: &'l CellLists, i: usize) -> &'l [u32] {
+        match self.slot_of_point.get(i) {
+            Some(&slot) if slot != NO_CELL => lists.of_slot(slot),
+            _ => &[],
+        }
     }
 }
 
