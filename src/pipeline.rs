@@ -10,7 +10,7 @@ use tacmesh_physics::orientation::{orient_outward, orientation};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
 use tacmesh_reconstruct::noise::{estimate_noise_m, estimate_points_per_m2};
 use tacmesh_reconstruct::surface::{
-    mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig,
+    mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig, Reconstruction,
 };
 use tacmesh_simplify::{
     fit_to_samples, simplify, simplify_near_points, FitConfig, SimplifyConfig, WeightedSample,
@@ -464,12 +464,16 @@ pub fn mesh_cloud_with_dense(
         }
         .with_mesh_step(mesh_step_voxels);
         // Reconstruction skips non-finite points itself (and counts the rest).
-        let (mut dense, grid, recon) = reconstruct_surface(cloud, &recon_config)
+        let Reconstruction {
+            mesh: mut dense,
+            coarse_grid,
+            report: recon,
+        } = reconstruct_surface(cloud, &recon_config)
             .map_err(|err| explain(err, &cloud.points, extent_m, voxel_size_m))?;
         orient_outward(&mut dense, config.viewpoint);
         let (mesh, mut report) = simplify_and_fit(
             &dense,
-            &grid,
+            &coarse_grid,
             max_residual_m,
             config.fit_to_data,
             config.viewpoint,
@@ -559,15 +563,14 @@ pub fn mesh_fused_grid(
         ..ReconstructConfig::with_voxel_size(grid.voxel_size_m())
     }
     .with_mesh_step(mesh_step_voxels);
-    let (dense, recon) = mesh_moment_grid(grid, &recon_config)?;
+    let Reconstruction {
+        mesh: dense,
+        coarse_grid,
+        report: recon,
+    } = mesh_moment_grid(grid, &recon_config)?;
     let (mesh, mut report) =
-        simplify_and_fit(&dense, grid, max_residual_m, fit_to_data, viewpoint)?;
-    report.points = grid
-        .sorted_cells()
-        .into_iter()
-        .filter_map(|cell| grid.get(cell))
-        .map(|m| m.count as usize)
-        .sum();
+        simplify_and_fit(&dense, &coarse_grid, max_residual_m, fit_to_data, viewpoint)?;
+    report.points = grid.iter().map(|(_, m)| m.count as usize).sum();
     report.voxel_size_m = grid.voxel_size_m();
     report.take_meshing_figures(&recon);
     report.total_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -575,14 +578,15 @@ pub fn mesh_fused_grid(
 }
 
 /// Simplifies the marching-cubes mesh `dense` under `max_residual_m`, then (optionally) fits
-/// the result to the voxel centroids of `grid`, simplifies the fitted mesh again under the same
+/// the result to the voxel centroids of `coarse_grid` (the fused points in voxels twice the
+/// reconstruction's), simplifies the fitted mesh again under the same
 /// bound on the same marching-cubes vertices and fits once more (up to [`REFINE_PASSES`]
 /// times, while a pass removes faces), and last makes every piece face
 /// out (closed pieces by their volume, open ones towards `viewpoint` when known). Fills the
 /// simplify, fit and orientation fields of the report.
 fn simplify_and_fit(
     dense: &TriMesh,
-    grid: &MomentGrid,
+    coarse_grid: &MomentGrid,
     max_residual_m: f32,
     fit_to_data: bool,
     viewpoint: Option<Vec3>,
@@ -600,14 +604,13 @@ fn simplify_and_fit(
     let mut last_pass = None;
     let mut refine_ms = 0.0;
     let fit = if fit_to_data {
-        // Centroids of voxels twice the marching-cubes size: a quarter of the samples, each
-        // the mean of several points, and still far finer than the simplified triangles.
-        let coarse = grid.coarsened(2);
-        let samples: Vec<WeightedSample> = coarse
+        // Centroids of voxels twice the reconstruction's: a quarter of the samples, each the
+        // mean of several points, and still far finer than the simplified triangles.
+        let samples: Vec<WeightedSample> = coarse_grid
             .sorted_cells()
             .into_iter()
             .filter_map(|cell| {
-                let m = coarse.get(cell)?;
+                let m = coarse_grid.get(cell)?;
                 Some(WeightedSample {
                     point: m.centroid()?,
                     weight: m.count as f32,

@@ -142,12 +142,23 @@ pub fn drop_small_pieces(mesh: &mut TriMesh, min_fraction: f32) -> usize {
     pieces_before - pieces_after
 }
 
-/// Reconstructs the surface of `cloud` as a marching-cubes mesh (dense; simplify it next), and
-/// returns the fused moment grid with it (later stages fit to it).
+/// What reconstruction made.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// The dense marching-cubes mesh (simplify it next).
+    pub mesh: TriMesh,
+    /// The fused points in voxels twice the reconstruction's (the scale its normals were
+    /// fitted at), for later stages to fit to: made once here rather than again by them.
+    pub coarse_grid: MomentGrid,
+    pub report: ReconstructReport,
+}
+
+/// Reconstructs the surface of `cloud` as a marching-cubes mesh (dense; simplify it next), with
+/// the fused points at twice the voxel (later stages fit to them).
 pub fn reconstruct_surface(
     cloud: &PointCloud,
     config: &ReconstructConfig,
-) -> Result<(TriMesh, MomentGrid, ReconstructReport), ReconstructError> {
+) -> Result<Reconstruction, ReconstructError> {
     if !(config.voxel_size_m.is_finite() && config.voxel_size_m > 0.0) {
         return Err(ReconstructError::BadVoxelSize {
             voxel_size_m: config.voxel_size_m,
@@ -157,17 +168,17 @@ pub fn reconstruct_surface(
     let mut grid = MomentGrid::new(config.voxel_size_m);
     let points = grid.integrate(&cloud.points);
     let integrate_ms = elapsed_ms(start);
-    let (mesh, mut report) = mesh_moment_grid(&grid, config)?;
-    report.points = points;
-    report.integrate_ms = integrate_ms;
-    Ok((mesh, grid, report))
+    let mut reconstruction = mesh_moment_grid(&grid, config)?;
+    reconstruction.report.points = points;
+    reconstruction.report.integrate_ms = integrate_ms;
+    Ok(reconstruction)
 }
 
 /// Meshes a fused moment grid (its voxel size wins over `config.voxel_size_m`).
 pub fn mesh_moment_grid(
     grid: &MomentGrid,
     config: &ReconstructConfig,
-) -> Result<(TriMesh, ReconstructReport), ReconstructError> {
+) -> Result<Reconstruction, ReconstructError> {
     let mut report = ReconstructReport {
         voxels: grid.len(),
         ..Default::default()
@@ -190,6 +201,7 @@ pub fn mesh_moment_grid(
         Orientation::Propagate => orient_by_propagation(&mut planes, &two_scale),
     }
     report.orient_ms = elapsed_ms(start);
+    let coarse_grid = two_scale.coarse;
 
     let mut mesh = surface_of_planes(&planes, grid.voxel_size_m(), config, &mut report);
     // A closed object sampled too coarsely comes out with holes: a thin part (Suzanne's ears at
@@ -204,7 +216,11 @@ pub fn mesh_moment_grid(
         mesh = surface_of_planes(&planes, grid.voxel_size_m(), &fine, &mut report);
     }
     report.faces = mesh.triangles.len();
-    Ok((mesh, report))
+    Ok(Reconstruction {
+        mesh,
+        coarse_grid,
+        report,
+    })
 }
 
 /// The signed distance to `planes` and its marching-cubes surface at `config`'s step; adds the
