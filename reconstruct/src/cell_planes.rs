@@ -14,12 +14,11 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use glam::{IVec3, Vec3};
-use rayon::prelude::*;
-use rustc_hash::FxHashMap;
-
+use crate::cell_index::CellIndex;
 use crate::moment_grid::MomentGrid;
 use crate::moments::PointMoments;
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
 
 /// The tangent plane of one voxel.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,32 +43,52 @@ impl CellPlane {
 pub struct TwoScaleGrid<'a> {
     pub fine: &'a MomentGrid,
     pub coarse: MomentGrid,
+    /// The coarse voxels' moments in (z, y, x) order of their voxels, and where each voxel is:
+    /// the fits below read them by cell dozens of times each.
+    coarse_moments: Vec<PointMoments>,
+    coarse_index: CellIndex,
     /// A plane per coarse voxel (see [`fit_coarse_planes`]), unoriented.
     pub coarse_planes: Vec<CellPlane>,
-    coarse_slot: FxHashMap<IVec3, u32>,
+    /// For each coarse voxel (in `coarse_cells` order), its plane's index in `coarse_planes`;
+    /// `NO_PLANE` when too few points fit one.
+    plane_of_coarse: Vec<u32>,
 }
+
+const NO_PLANE: u32 = u32::MAX;
 
 impl<'a> TwoScaleGrid<'a> {
     pub fn new(fine: &'a MomentGrid) -> Self {
         let coarse = fine.coarsened(2);
-        let coarse_planes = fit_coarse_planes(&coarse);
-        let coarse_slot = coarse_planes
+        let coarse_cells = coarse.sorted_cells();
+        let coarse_moments: Vec<PointMoments> = coarse_cells
             .iter()
-            .enumerate()
-            .map(|(i, p)| (p.cell, i as u32))
+            .map(|&cell| coarse.get(cell).copied().unwrap_or_default())
             .collect();
+        let coarse_index = CellIndex::new(&coarse_cells);
+        let (coarse_planes, plane_of_coarse) =
+            fit_coarse_planes(&coarse_cells, &coarse_moments, &coarse_index);
         Self {
             fine,
             coarse,
+            coarse_moments,
+            coarse_index,
             coarse_planes,
-            coarse_slot,
+            plane_of_coarse,
+        }
+    }
+
+    /// The index in `coarse_planes` of the plane of the coarse voxel holding fine voxel `cell`.
+    fn parent_plane_index(&self, cell: IVec3) -> Option<usize> {
+        let slot = self.coarse_index.get(cell.div_euclid(IVec3::splat(2)))?;
+        match self.plane_of_coarse[slot as usize] {
+            NO_PLANE => None,
+            plane => Some(plane as usize),
         }
     }
 
     /// The plane of the coarse voxel holding fine voxel `cell`.
     fn parent_plane(&self, cell: IVec3) -> Option<&CellPlane> {
-        let slot = *self.coarse_slot.get(&cell.div_euclid(IVec3::splat(2)))?;
-        self.coarse_planes.get(slot as usize)
+        self.coarse_planes.get(self.parent_plane_index(cell)?)
     }
 
     /// Moments of the 4×4×4 fine voxels centred on `cell`: the 2×2×2 coarse voxels on the side
@@ -82,8 +101,8 @@ impl<'a> TwoScaleGrid<'a> {
         for dz in 0..2 {
             for dy in 0..2 {
                 for dx in 0..2 {
-                    if let Some(m) = self.coarse.get(first + IVec3::new(dx, dy, dz)) {
-                        sum += m;
+                    if let Some(slot) = self.coarse_index.get(first + IVec3::new(dx, dy, dz)) {
+                        sum += &self.coarse_moments[slot as usize];
                     }
                 }
             }
@@ -93,13 +112,26 @@ impl<'a> TwoScaleGrid<'a> {
 }
 
 /// The plane of every coarse voxel, fitted over it and its 26 neighbours (a box six fine voxels
-/// wide); normals unoriented.
-fn fit_coarse_planes(coarse: &MomentGrid) -> Vec<CellPlane> {
-    coarse
-        .sorted_cells()
+/// wide); normals unoriented. Returns the planes in the voxels' order and, per voxel, its
+/// plane's index (`NO_PLANE` for none).
+fn fit_coarse_planes(
+    cells: &[IVec3],
+    moments: &[PointMoments],
+    index: &CellIndex,
+) -> (Vec<CellPlane>, Vec<u32>) {
+    let fitted: Vec<Option<CellPlane>> = cells
         .par_iter()
-        .filter_map(|&cell| {
-            let around = coarse.neighbourhood(cell, 1);
+        .map(|&cell| {
+            let mut around = PointMoments::default();
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        if let Some(slot) = index.get(cell + IVec3::new(dx, dy, dz)) {
+                            around += &moments[slot as usize];
+                        }
+                    }
+                }
+            }
             let plane = around.plane()?;
             Some(CellPlane {
                 cell,
@@ -108,7 +140,19 @@ fn fit_coarse_planes(coarse: &MomentGrid) -> Vec<CellPlane> {
                 points: around.count as f32,
             })
         })
-        .collect()
+        .collect();
+    let mut planes = Vec::with_capacity(fitted.len());
+    let plane_of = fitted
+        .into_iter()
+        .map(|plane| match plane {
+            Some(plane) => {
+                planes.push(plane);
+                (planes.len() - 1) as u32
+            }
+            None => NO_PLANE,
+        })
+        .collect();
+    (planes, plane_of)
 }
 
 /// Fits a plane to every occupied voxel whose 4×4×4 box holds at least `min_points` points
@@ -161,11 +205,9 @@ pub fn orient_by_propagation(planes: &mut [CellPlane], grid: &TwoScaleGrid) {
     let mut coarse = grid.coarse_planes.clone();
     orient_by_spanning_tree(&mut coarse);
     planes.par_iter_mut().for_each(|plane| {
-        let parent = plane.cell.div_euclid(IVec3::splat(2));
         let oriented = grid
-            .coarse_slot
-            .get(&parent)
-            .and_then(|&i| coarse.get(i as usize));
+            .parent_plane_index(plane.cell)
+            .and_then(|i| coarse.get(i));
         if let Some(parent) = oriented {
             if plane.normal.dot(parent.normal) < 0.0 {
                 plane.normal = -plane.normal;
@@ -205,11 +247,8 @@ impl PartialOrd for GraphEdge {
 /// normal is flipped to agree with its parent. Every connected part starts at its highest
 /// plane, oriented to +z, and is then turned as a whole by [`face_extremes_out`].
 fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
-    let slot: FxHashMap<IVec3, u32> = planes
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (p.cell, i as u32))
-        .collect();
+    let cells: Vec<IVec3> = planes.iter().map(|p| p.cell).collect();
+    let slot = CellIndex::new(&cells);
     let mut order: Vec<u32> = (0..planes.len() as u32).collect();
     order.sort_by(|&a, &b| {
         planes[b as usize]
@@ -283,7 +322,7 @@ fn face_extremes_out(planes: &mut [CellPlane], part: &[u32]) {
 }
 
 fn push_edges(
-    slot: &FxHashMap<IVec3, u32>,
+    slot: &CellIndex,
     planes: &[CellPlane],
     reached: &[bool],
     from: u32,
@@ -300,7 +339,7 @@ fn push_edges(
         IVec3::Z,
         IVec3::NEG_Z,
     ] {
-        let Some(&to) = slot.get(&(here.cell + step)) else {
+        let Some(to) = slot.get(here.cell + step) else {
             continue;
         };
         if !reached[to as usize] {

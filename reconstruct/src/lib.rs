@@ -9,6 +9,7 @@
 //! - [`enclosed_band::close_where_band_ends`]: closes thin parts of a closed surface;
 //! - [`marching_cubes::marching_cubes`]: the zero level set of a [`sparse_sdf::SparseSdf`].
 
+pub mod cell_index;
 pub mod cell_planes;
 pub mod enclosed_band;
 pub mod marching_cubes;

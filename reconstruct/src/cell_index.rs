@@ -1,0 +1,125 @@
+//! Where each voxel of a fixed list is: cell → its position in the list.
+//!
+//! The plane fits read 27, 8 and 1 neighbouring voxels per voxel, and with a hash map those
+//! look-ups were most of their time. An object's voxels fill a compact box (a 1 m object's
+//! surface fills about a fifth of its coarse voxels' bounding box), so a dense array over the box
+//! answers each look-up with one read; a list spread far apart (a scene with distant outliers)
+//! falls back to a hash map. Written here rather than taken from a crate because it is one array
+//! with a bounds check, shaped to the voxel keys.
+
+use glam::{I64Vec3, IVec3};
+use rustc_hash::FxHashMap;
+
+const NONE: u32 = u32::MAX;
+
+/// The dense array may hold at most this many entries per listed voxel (4 bytes each)...
+const MAX_BOX_CELLS_PER_CELL: i64 = 64;
+/// ...or this many, for short lists...
+const MIN_DENSE_CELLS: i64 = 1 << 12;
+/// ...and never more than this (64 MiB).
+const MAX_DENSE_CELLS: i64 = 1 << 24;
+
+/// Cell → index into the list the index was made from.
+#[derive(Debug, Clone)]
+pub struct CellIndex {
+    lookup: Lookup,
+}
+
+#[derive(Debug, Clone)]
+enum Lookup {
+    /// `slots[x + dims.x · (y + dims.y · z)]` for the cell `min + (x, y, z)`.
+    Dense {
+        min: I64Vec3,
+        dims: I64Vec3,
+        slots: Vec<u32>,
+    },
+    Sparse(FxHashMap<IVec3, u32>),
+}
+
+impl CellIndex {
+    /// Indexes `cells` (distinct; a repeated cell finds its last position).
+    pub fn new(cells: &[IVec3]) -> Self {
+        let Some(&first) = cells.first() else {
+            return Self {
+                lookup: Lookup::Sparse(FxHashMap::default()),
+            };
+        };
+        let (lo, hi) = cells
+            .iter()
+            .fold((first, first), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+        let (min, dims) = (lo.as_i64vec3(), hi.as_i64vec3() - lo.as_i64vec3() + 1);
+        let box_cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
+        let dense_limit = (MAX_BOX_CELLS_PER_CELL.saturating_mul(cells.len() as i64))
+            .clamp(MIN_DENSE_CELLS, MAX_DENSE_CELLS);
+        let lookup = if box_cells <= dense_limit {
+            let mut slots = vec![NONE; box_cells as usize];
+            for (i, &cell) in cells.iter().enumerate() {
+                let d = cell.as_i64vec3() - min;
+                slots[(d.x + dims.x * (d.y + dims.y * d.z)) as usize] = i as u32;
+            }
+            Lookup::Dense { min, dims, slots }
+        } else {
+            Lookup::Sparse(
+                cells
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &c)| (c, i as u32))
+                    .collect(),
+            )
+        };
+        Self { lookup }
+    }
+
+    /// The position of `cell` in the list, if it is there.
+    #[inline]
+    pub fn get(&self, cell: IVec3) -> Option<u32> {
+        match &self.lookup {
+            Lookup::Dense { min, dims, slots } => {
+                let d = cell.as_i64vec3() - *min;
+                if d.cmplt(I64Vec3::ZERO).any() || d.cmpge(*dims).any() {
+                    return None;
+                }
+                let slot = slots[(d.x + dims.x * (d.y + dims.y * d.z)) as usize];
+                (slot != NONE).then_some(slot)
+            }
+            Lookup::Sparse(map) => map.get(&cell).copied(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Compact lists go dense and far-flung ones sparse; both find every listed cell and
+    /// nothing else, including cells beyond the box on every side and at the ends of `i32`.
+    #[test]
+    fn every_listed_cell_is_found_and_no_other() {
+        let compact: Vec<IVec3> = (0..200)
+            .map(|i| IVec3::new(i % 7 - 3, (i / 7) % 5 - 9, i / 35))
+            .collect();
+        let mut far_flung = compact.clone();
+        far_flung.push(IVec3::new(i32::MAX, 0, i32::MIN));
+        for cells in [compact, far_flung] {
+            let index = CellIndex::new(&cells);
+            let dense = matches!(index.lookup, Lookup::Dense { .. });
+            assert_eq!(dense, cells.len() == 200);
+            for (i, &cell) in cells.iter().enumerate() {
+                assert_eq!(index.get(cell), Some(i as u32));
+            }
+            for cell in [
+                IVec3::new(4, -9, 0),
+                IVec3::new(-4, -9, 0),
+                IVec3::new(0, -10, 0),
+                IVec3::new(0, -4, 0),
+                IVec3::new(0, -9, -1),
+                IVec3::new(0, -9, 6),
+                IVec3::splat(i32::MIN),
+                IVec3::splat(i32::MAX),
+            ] {
+                assert_eq!(index.get(cell), None, "{cell}");
+            }
+        }
+        assert_eq!(CellIndex::new(&[]).get(IVec3::ZERO), None);
+    }
+}
