@@ -8,6 +8,8 @@ use std::time::Instant;
 use serde::Serialize;
 use tacmesh_physics::orientation::{orient_outward, orientation};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tacmesh_reconstruct::noise::estimate_noise_and_density;
+#[cfg(doc)]
 use tacmesh_reconstruct::noise::{estimate_noise_m, estimate_points_per_m2};
 use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig, Reconstruction,
@@ -156,10 +158,11 @@ pub fn noise_dominates(noise_m: f32, base_voxel_m: f32) -> bool {
 /// marching-cubes step and then, when the noise or the spacing had grown the voxel, with the
 /// voxel this many times larger (on every second corner), in this order; the first mesh that
 /// is one closed piece is kept, and when none is the first mesh stays. Measured at 40 mm
-/// noise from 5,000 points, seeds 101-103: Suzanne's ears (open at 24 mm on seed 102: 523 faces) close at 1.4x (90 faces) but not at
-/// 1.2x, the torus (open at 27 mm on seed 103) closes at 1.2x (76 faces, 11.3 mm for
-/// 13.1) while at 1.3x its 20 cm tube opens on every seed. Clouds that come out closed are
-/// never remeshed; an open scan with no viewpoint pays for up to three tries more.
+/// noise from 5,000 points, seeds 101-103: Suzanne's ears (open at 24 mm on seed 102: 523
+/// faces) close at 1.4x (90 faces) but not at 1.2x, the torus (open at 27 mm on seed 103)
+/// closes at 1.2x (76 faces, 11.3 mm for 13.1) while at 1.3x its 20 cm tube opens on every
+/// seed. Clouds that come out closed are never remeshed; an open scan with no viewpoint pays
+/// for up to three tries more.
 pub const LARGER_VOXEL_RETRIES: [f32; 2] = [1.2, 1.4];
 
 /// Default residual bound: 2.5 % of the object's extent (25 mm for a 1 m object).
@@ -429,8 +432,11 @@ pub fn mesh_cloud_with_dense(
         .filter(|&e| e > 0.0)
         .unwrap_or((hi - lo).max_element());
     let base_voxel_m = config.voxel_size.resolve_m(extent_m);
-    let noise_m = estimate_noise_m(&cloud.points, 2.0 * base_voxel_m).unwrap_or(0.0);
-    let spacing_m = estimate_points_per_m2(&cloud.points, (2.0 * base_voxel_m).max(2.0 * noise_m))
+    // The density over cells that hold the noise's spread: 2 × voxel, or twice the noise.
+    let estimates = estimate_noise_and_density(&cloud.points, 2.0 * base_voxel_m);
+    let noise_m = estimates.noise_m.unwrap_or(0.0);
+    let spacing_m = estimates
+        .points_per_m2
         .map_or(0.0, |density| density.recip().sqrt());
     let voxel_size_m = match config.voxel_size {
         Length::OfExtent(_) if config.adapt_to_data => {

@@ -14,12 +14,12 @@
 //! the noise: noise spreads the points into a slab and pushes neighbours apart, so the same
 //! points per area look twice as sparse at 20 mm noise as with none.
 //!
-//! Entry points: [`estimate_noise_m`], [`estimate_points_per_m2`].
+//! Entry points: [`estimate_noise_m`], [`estimate_points_per_m2`], and both at once (sharing
+//! their boxes where they can) [`estimate_noise_and_density`].
 
 use glam::Vec3;
 
 use crate::moment_grid::MomentGrid;
-use crate::moments::{Plane, PointMoments};
 
 /// At most this many points go into the estimate (an even subsample of the cloud): the median
 /// of a few hundred boxes is as good as that of thousands, and the estimate stays cheap.
@@ -37,20 +37,7 @@ const MIN_BOXES: usize = 8;
 /// estimate is made again with cells twice the spread. `None` when too few boxes hold enough
 /// points.
 pub fn estimate_noise_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
-    if !(cell_m.is_finite() && cell_m > 0.0) {
-        return None;
-    }
-    let (sample, _) = finite_sample(points);
-    let mut cell_m = cell_m;
-    let mut estimate = median_spread_m(&sample, cell_m)?;
-    for _ in 0..2 {
-        if estimate <= cell_m / 2.0 {
-            break;
-        }
-        cell_m = 2.0 * estimate;
-        estimate = median_spread_m(&sample, cell_m)?;
-    }
-    Some(estimate)
+    estimate_noise_and_density(points, cell_m).noise_m
 }
 
 /// Points per square metre of surface, estimated over boxes three `cell_m` cells wide centred on
@@ -61,12 +48,80 @@ pub fn estimate_points_per_m2(points: &[Vec3], cell_m: f32) -> Option<f32> {
         return None;
     }
     let (sample, finite) = finite_sample(points);
-    let counts = centred_boxes(&sample, cell_m, MIN_POINTS_FOR_A_PLANE)
-        .map(|(around, _)| around.count)
-        .collect();
+    density_of(
+        &centred_boxes(&sample, cell_m),
+        cell_m,
+        finite,
+        sample.len(),
+    )
+}
+
+/// A cloud's noise and density, each `None` when it could not be told.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseAndDensity {
+    /// As [`estimate_noise_m`] finds it from cells of at least `cell_m`.
+    pub noise_m: Option<f32>,
+    /// As [`estimate_points_per_m2`] finds it from cells of `cell_m` or twice the noise,
+    /// whichever is larger.
+    pub points_per_m2: Option<f32>,
+}
+
+/// [`estimate_noise_m`] from cells of at least `cell_m`, and [`estimate_points_per_m2`] from
+/// cells of `cell_m` or twice the noise found (0 when none), whichever is larger, as the
+/// pipeline sizes its voxel from them: when the density's cells are ones the noise was already
+/// measured on (a cloud whose noise is under half the cell), their boxes are read once.
+pub fn estimate_noise_and_density(points: &[Vec3], cell_m: f32) -> NoiseAndDensity {
+    if !(cell_m.is_finite() && cell_m > 0.0) {
+        return NoiseAndDensity {
+            noise_m: None,
+            points_per_m2: None,
+        };
+    }
+    let (sample, finite) = finite_sample(points);
+    let first_boxes = centred_boxes(&sample, cell_m);
+    let mut last = (cell_m, None);
+    let noise_m = (|| {
+        let mut cell_m = cell_m;
+        let mut estimate = median_spread_m(&first_boxes)?;
+        for _ in 0..2 {
+            if estimate <= cell_m / 2.0 {
+                break;
+            }
+            cell_m = 2.0 * estimate;
+            let boxes = centred_boxes(&sample, cell_m);
+            estimate = median_spread_m(&boxes)?;
+            last = (cell_m, Some(boxes));
+        }
+        Some(estimate)
+    })();
+    let density_cell_m = cell_m.max(2.0 * noise_m.unwrap_or(0.0));
+    let points_per_m2 = match last {
+        _ if density_cell_m == cell_m => {
+            density_of(&first_boxes, density_cell_m, finite, sample.len())
+        }
+        (last_cell_m, Some(boxes)) if last_cell_m == density_cell_m => {
+            density_of(&boxes, density_cell_m, finite, sample.len())
+        }
+        _ => density_of(
+            &centred_boxes(&sample, density_cell_m),
+            density_cell_m,
+            finite,
+            sample.len(),
+        ),
+    };
+    NoiseAndDensity {
+        noise_m,
+        points_per_m2,
+    }
+}
+
+/// Points per square metre from the boxes of `cell_m` cells of a sample of `sampled` of the
+/// cloud's `finite` points.
+fn density_of(boxes: &[CentredBox], cell_m: f32, finite: usize, sampled: usize) -> Option<f32> {
+    let counts = boxes.iter().map(|b| b.points).collect();
     let median = median_of_boxes(counts)?;
     let box_side_m = 3.0 * f64::from(cell_m);
-    let per_sample_point = finite as f64 / sample.len() as f64;
+    let per_sample_point = finite as f64 / sampled as f64;
     Some((median * per_sample_point / (CROSS_SECTION * box_side_m * box_side_m)) as f32)
 }
 
@@ -100,41 +155,50 @@ fn median_of_boxes(mut values: Vec<f64>) -> Option<f64> {
     Some(*values.select_nth_unstable_by(middle, f64::total_cmp).1)
 }
 
-/// The boxes of 3 × 3 × 3 `cell_m` cells, with at least `min_points` points, whose points'
-/// plane crosses the middle cell: the moments of the box and that plane.
-fn centred_boxes(
-    points: &[Vec3],
-    cell_m: f32,
-    min_points: f64,
-) -> impl Iterator<Item = (PointMoments, Plane)> {
+/// A box of 3 × 3 × 3 cells centred on the surface: how many points it holds, and their
+/// standard deviation along the normal of their plane.
+struct CentredBox {
+    points: f64,
+    spread_m: f64,
+}
+
+/// The boxes of 3 × 3 × 3 `cell_m` cells, with enough points for a plane, whose points' plane
+/// crosses the middle cell.
+fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let mut grid = MomentGrid::new(cell_m);
     for &p in points {
         grid.add_point(p);
     }
-    grid.sorted_cells().into_iter().filter_map(move |cell| {
-        let around = grid.neighbourhood(cell, 1);
-        if around.count < min_points {
-            return None;
-        }
-        let plane = around.plane()?;
-        // A box beside the surface holds only one tail of the noise (and a sliver of the
-        // surface): only boxes centred on it measure the whole.
-        let centre = (cell.as_vec3() + 0.5) * cell_m;
-        if plane.normal.dot(centre - plane.point).abs() > cell_m / 2.0 {
-            return None;
-        }
-        Some((around, plane))
-    })
+    grid.sorted_cells()
+        .into_iter()
+        .filter_map(|cell| {
+            let around = grid.neighbourhood(cell, 1);
+            if around.count < MIN_POINTS_FOR_A_PLANE {
+                return None;
+            }
+            let plane = around.plane()?;
+            // A box beside the surface holds only one tail of the noise (and a sliver of the
+            // surface): only boxes centred on it measure the whole.
+            let centre = (cell.as_vec3() + 0.5) * cell_m;
+            if plane.normal.dot(centre - plane.point).abs() > cell_m / 2.0 {
+                return None;
+            }
+            let normal = plane.normal.as_dvec3();
+            Some(CentredBox {
+                points: around.count,
+                spread_m: normal.dot(around.covariance() * normal).max(0.0).sqrt(),
+            })
+        })
+        .collect()
 }
 
-/// The median, over boxes of 3 × 3 × 3 cells whose points' plane crosses the middle cell, of
-/// the points' standard deviation along the plane's normal.
-fn median_spread_m(points: &[Vec3], cell_m: f32) -> Option<f32> {
-    let spreads = centred_boxes(points, cell_m, MIN_POINTS_PER_BOX)
-        .map(|(around, plane)| {
-            let normal = plane.normal.as_dvec3();
-            normal.dot(around.covariance() * normal).max(0.0).sqrt()
-        })
+/// The median, over the boxes with at least [`MIN_POINTS_PER_BOX`] points, of the points'
+/// standard deviation along their plane's normal.
+fn median_spread_m(boxes: &[CentredBox]) -> Option<f32> {
+    let spreads = boxes
+        .iter()
+        .filter(|b| b.points >= MIN_POINTS_PER_BOX)
+        .map(|b| b.spread_m)
         .collect();
     median_of_boxes(spreads).map(|spread| spread as f32)
 }
