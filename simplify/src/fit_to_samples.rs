@@ -85,8 +85,16 @@ fn assign(
         .map(|(i, s)| {
             let mut best: Option<Assignment> = None;
             for &t in cells.near_point(&lists, i) {
-                let (d_sq, [beta, gamma]) = queries[t as usize].closest(s.point);
-                if d_sq < best.as_ref().map_or(reject_sq, |b| b.distance_sq_m2) {
+                let query = &queries[t as usize];
+                let bound = best.as_ref().map_or(reject_sq, |b| b.distance_sq_m2);
+                // The plane is never farther than the triangle: a triangle whose plane is
+                // already as far as the best needs no exact distance.
+                let h = query.plane_distance(s.point);
+                if h * h >= bound {
+                    continue;
+                }
+                let (d_sq, [beta, gamma]) = query.closest(s.point);
+                if d_sq < bound {
                     best = Some(Assignment {
                         triangle: t,
                         weights: [1.0 - beta - gamma, beta, gamma],
