@@ -15,7 +15,8 @@ use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig, Reconstruction,
 };
 use tacmesh_simplify::{
-    fit_to_samples, simplify, simplify_near_points, FitConfig, SimplifyConfig, WeightedSample,
+    fit_to_samples, rms_distance_m, simplify, simplify_near_points, FitConfig, SimplifyConfig,
+    WeightedSample,
 };
 use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
 
@@ -628,6 +629,8 @@ fn simplify_and_fit(
             max_move_m: max_residual_m,
             reject_m: 2.5 * max_residual_m,
             stiffness: 1e-3,
+            // Measured once, on the final mesh, below.
+            measure_after: false,
         };
         let mut fit = fit_to_samples(&mut mesh, &samples, &fit_config);
         // The fit put back the corners and edges that marching cubes had rounded, so chamfer
@@ -655,7 +658,6 @@ fn simplify_and_fit(
                     ..fit_config
                 },
             );
-            fit.rms_after_m = refit.rms_after_m;
             fit.max_move_m = fit.max_move_m.max(refit.max_move_m);
             if pass.points_beyond_bound * MAX_UNHELD_PER_VERTEX > dense.vertices.len() {
                 // The fits have carried the surface away from the marching-cubes vertices
@@ -664,6 +666,7 @@ fn simplify_and_fit(
             }
         }
         simplify_ms += refine_ms;
+        fit.rms_after_m = rms_distance_m(&mesh, &samples, fit_config.reject_m);
         fit
     } else {
         Default::default()

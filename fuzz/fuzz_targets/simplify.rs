@@ -54,6 +54,7 @@ fuzz_target!(|data: &[u8]| {
             max_move_m: config.max_residual_m,
             reject_m: 2.5 * config.max_residual_m,
             stiffness: 1e-3,
+            measure_after: true,
         };
         let triangles = out.triangles.clone();
         fit_to_samples(&mut out, &samples, &fit);

@@ -43,6 +43,10 @@ pub struct FitConfig {
     pub reject_m: f32,
     /// Spring towards the simplified position, relative to a vertex's data weight.
     pub stiffness: f32,
+    /// Whether to measure [`FitReport::rms_after_m`]: one more nearest-triangle pass over the
+    /// samples, as costly as an iteration. A caller that changes the mesh and fits again
+    /// measures once at the end with [`rms_distance_m`] instead.
+    pub measure_after: bool,
 }
 
 /// What the fit did.
@@ -51,6 +55,7 @@ pub struct FitReport {
     pub samples_used: usize,
     /// Weighted RMS point-to-mesh distance of the used samples before and after, metres.
     pub rms_before_m: f32,
+    /// Zero unless [`FitConfig::measure_after`].
     pub rms_after_m: f32,
     /// The largest distance a vertex moved, metres.
     pub max_move_m: f32,
@@ -254,8 +259,10 @@ pub fn fit_to_samples(
             }
         }
     }
-    let assignments = assign(mesh, samples, &cells, config.reject_m);
-    report.rms_after_m = weighted_rms(samples, &assignments).0;
+    if config.measure_after {
+        let assignments = assign(mesh, samples, &cells, config.reject_m);
+        report.rms_after_m = weighted_rms(samples, &assignments).0;
+    }
     report.max_move_m = mesh
         .vertices
         .iter()
@@ -263,6 +270,17 @@ pub fn fit_to_samples(
         .map(|(a, b)| a.distance(*b))
         .fold(0.0, f32::max);
     report
+}
+
+/// The weighted RMS distance from `samples` to `mesh`, metres, over the samples within
+/// `reject_m` of it (what [`FitReport`] reports); zero when none is. `reject_m` must be
+/// positive.
+pub fn rms_distance_m(mesh: &TriMesh, samples: &[WeightedSample], reject_m: f32) -> f32 {
+    if mesh.triangles.is_empty() || samples.is_empty() || mesh.first_bad_index().is_some() {
+        return 0.0;
+    }
+    let cells = PointCells::new(samples.iter().map(|s| s.point), reject_m);
+    weighted_rms(samples, &assign(mesh, samples, &cells, reject_m)).0
 }
 
 #[cfg(test)]
@@ -314,12 +332,28 @@ mod tests {
                 max_move_m: 0.5,
                 reject_m: 1.0,
                 stiffness: 1e-3,
+                measure_after: true,
             },
         );
         assert!(report.rms_after_m < 0.2 * report.rms_before_m, "{report:?}");
         for (v, truth) in mesh.vertices.iter().zip(&truth.vertices) {
             assert!(v.distance(*truth) < 0.02, "{v} should be near {truth}");
         }
+        // Measured apart, the same figure; unmeasured, none.
+        assert_eq!(rms_distance_m(&mesh, &samples, 1.0), report.rms_after_m);
+        let unmeasured = fit_to_samples(
+            &mut mesh,
+            &samples,
+            &FitConfig {
+                iterations: 1,
+                max_move_m: 0.5,
+                reject_m: 1.0,
+                stiffness: 1e-3,
+                measure_after: false,
+            },
+        );
+        assert_eq!(unmeasured.rms_after_m, 0.0);
+        assert!(unmeasured.rms_before_m > 0.0);
     }
 
     /// Found by fuzzing (`fuzz/`, target `simplify`): a 2 m cube of 12 triangles with a
@@ -366,6 +400,7 @@ mod tests {
                 max_move_m: 0.001,
                 reject_m: 0.0025,
                 stiffness: 1e-3,
+                measure_after: true,
             },
         );
         assert_eq!(report.samples_used, 8, "{report:?}");
@@ -389,6 +424,7 @@ mod tests {
                 max_move_m: 0.05,
                 reject_m: 2.0,
                 stiffness: 1e-3,
+                measure_after: true,
             },
         );
         assert!(report.max_move_m <= 0.05 + 1e-6, "{report:?}");

@@ -67,7 +67,7 @@ mod quadric;
 mod triangle_grid;
 
 pub use edge_collapse::{simplify, simplify_near_points};
-pub use fit_to_samples::{fit_to_samples, FitConfig, FitReport, WeightedSample};
+pub use fit_to_samples::{fit_to_samples, rms_distance_m, FitConfig, FitReport, WeightedSample};
 
 use glam::Vec3;
 
