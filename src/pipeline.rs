@@ -15,8 +15,8 @@ use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig, Reconstruction,
 };
 use tacmesh_simplify::{
-    fit_to_samples, rms_distance_m, simplify, simplify_near_points, FitConfig, SimplifyConfig,
-    WeightedSample,
+    fit_to_samples, rms_distance_m, simplify, simplify_near_held_points, FitConfig, HeldPoints,
+    SimplifyConfig, WeightedSample,
 };
 use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
 
@@ -641,9 +641,10 @@ fn simplify_and_fit(
         // 28-34 faces after the first pass, 12-14 after one more; at 20,000 points 54-60,
         // 18-24 after one and 12-16 after three). A vertex the fit carried beyond the bound is
         // not held (there is no face it could be held to); the report counts them.
+        let held = HeldPoints::new(&dense.vertices, max_residual_m);
         for _ in 0..REFINE_PASSES {
             let pass_start = Instant::now();
-            let (merged, pass) = simplify_near_points(&mesh, &dense.vertices, &simplify_config)?;
+            let (merged, pass) = simplify_near_held_points(&mesh, &held, &simplify_config)?;
             last_pass = Some(pass);
             refine_ms += pass_start.elapsed().as_secs_f64() * 1e3;
             if merged.triangles.len() >= mesh.triangles.len() {

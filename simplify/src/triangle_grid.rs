@@ -1,16 +1,20 @@
 //! Triangles bucketed in a uniform grid, for "which triangles can be within `cell_m` of this
-//! point" on small meshes: the fit's nearest-triangle search and the second pass's assignment
-//! of extra support points.
+//! point" on small meshes, asked for the same points of mesh after mesh: the fit's
+//! nearest-triangle search and the later passes' assignment of extra support points.
 
 use glam::{I64Vec3, IVec3, Vec3};
 use rustc_hash::FxHashMap;
 
-/// Triangles bucketed in a uniform grid of `cell_m` cubes: each triangle goes in every cell
-/// that holds a query point, touches its bounding box grown by `cell_m`, and has its centre
-/// within `cell_m` plus half the cell's diagonal of the triangle's plane, so a point's cell
-/// lists every triangle within `cell_m` of it (in ascending triangle order). The meshes it
-/// serves are small (tens to hundreds of triangles), so a flat grid is all the acceleration
-/// they need.
+/// The occupied cells of a fixed set of query points in a uniform grid of `cell_m` cubes, found
+/// once and then bucketed against mesh after mesh (the fit moves the same mesh's vertices and
+/// asks again for the same samples; the simplifier's passes hold each new mesh to the same
+/// points): hashing every point on every round was over half of the fit's time.
+///
+/// [`PointCells::bucket`] puts each triangle in every cell that holds a query point, touches
+/// its bounding box grown by `cell_m`, and has its centre within `cell_m` plus half the cell's
+/// diagonal of the triangle's plane, so a point's cell lists every triangle within `cell_m` of
+/// it (in ascending triangle order). The meshes it serves are small (tens to hundreds of
+/// triangles), so a flat grid is all the acceleration they need.
 ///
 /// Only cells with query points are filled. A triangle whose grown box spans few cells walks
 /// them through the map; a larger one (a flat face of a large object under a tight residual
@@ -18,34 +22,6 @@ use rustc_hash::FxHashMap;
 /// of megabytes, found by fuzzing, see `fuzz/README.md`) is tested against each occupied cell,
 /// box and plane, with no hashing. The plane test keeps a large face out of the cells its box
 /// only grazes: fewer exact distances for the queries.
-pub(crate) struct TriangleGrid {
-    cells: PointCells,
-    lists: CellLists,
-}
-
-impl TriangleGrid {
-    /// `triangles` gives the corners of each triangle in order; `points` are where
-    /// [`TriangleGrid::near`] will be asked (non-finite ones are skipped). `cell_m` must be
-    /// positive.
-    pub(crate) fn new(
-        triangles: impl Iterator<Item = [Vec3; 3]>,
-        points: impl Iterator<Item = Vec3>,
-        cell_m: f32,
-    ) -> Self {
-        let cells = PointCells::new(points, cell_m);
-        let lists = cells.bucket(triangles);
-        Self { cells, lists }
-    }
-
-    /// The triangles that can be within `cell_m` of `p` (a superset of them), ascending.
-    pub(crate) fn near(&self, p: Vec3) -> &[u32] {
-        self.cells.near(&self.lists, p)
-    }
-}
-
-/// The occupied cells of a fixed set of query points, found once and then bucketed against
-/// mesh after mesh (the fit moves the same mesh's vertices and asks again for the same
-/// samples): hashing every sample on every iteration was over half of the fit's time.
 pub(crate) struct PointCells {
     cell_m: f32,
     /// Occupied cell -> its slot in `occupied` (and in a [`CellLists`]).
@@ -110,8 +86,8 @@ impl PointCells {
         self.occupied.len()
     }
 
-    /// Lists each triangle in the occupied cells it can be within `cell_m` of (see
-    /// [`TriangleGrid`]).
+    /// Lists each triangle (given by its corners, in order) in the occupied cells it can be
+    /// within `cell_m` of (see [`PointCells`]).
     pub(crate) fn bucket(&self, triangles: impl Iterator<Item = [Vec3; 3]>) -> CellLists {
         let cell_m = self.cell_m;
         let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
@@ -177,6 +153,7 @@ impl PointCells {
 
     /// The triangles of `lists` that can be within `cell_m` of `p` (a superset of them),
     /// ascending.
+    #[cfg(test)]
     pub(crate) fn near<'l>(&self, lists: &'l CellLists, p: Vec3) -> &'l [u32] {
         let cell = (p / self.cell_m).floor().as_ivec3();
         self.index
@@ -232,10 +209,12 @@ mod tests {
                 })
                 .collect();
             let cell_m = 0.03;
-            let grid = TriangleGrid::new(triangles.iter().copied(), points.iter().copied(), cell_m);
+            let cells = PointCells::new(points.iter().copied(), cell_m);
+            let lists = cells.bucket(triangles.iter().copied());
             let mut within = [0; 3];
-            for &p in &points {
-                let near = grid.near(p);
+            for (i, &p) in points.iter().enumerate() {
+                let near = cells.near_point(&lists, i);
+                assert_eq!(near, cells.near(&lists, p));
                 assert!(near.windows(2).all(|w| w[0] < w[1]), "ascending: {near:?}");
                 for (t, [a, b, c]) in triangles.iter().enumerate() {
                     let d = TriangleQuery::new(*a, *b, *c).distance_sq(p).sqrt();
