@@ -61,9 +61,10 @@ pub struct MeshConfig {
     /// in pieces. A voxel given in metres is used as given.
     pub adapt_to_data: bool,
     /// Marching-cubes cell edge in voxels (the signed distance is sampled on every this-many
-    /// voxel corner); `None` picks [`MESH_STEP_VOXELS`] for a cloud with no viewpoint when the
-    /// cell stays within [`MAX_MESH_CELL_OF_EXTENT`] of the extent or the noise dominates
-    /// ([`noise_dominates`]), else 1.
+    /// voxel corner); `None` picks, for a cloud with no viewpoint, [`MESH_STEP_VOXELS`] when the
+    /// noise dominates ([`noise_dominates`]), else [`DENSE_MESH_STEP_VOXELS`] for a dense cloud
+    /// (see [`MAX_DENSE_MESH_CELL_OF_EXTENT`]), else [`MESH_STEP_VOXELS`] while its cell stays
+    /// within [`MAX_MESH_CELL_OF_EXTENT`] of the extent, else 1; and 1 for a one-view scan.
     pub mesh_step_voxels: Option<i32>,
 }
 
@@ -124,6 +125,23 @@ pub const DEFAULT_VOXEL_OF_EXTENT: f32 = 0.02;
 /// opened the torus (0.03 of the extent at 20 mm noise).
 pub const MESH_STEP_VOXELS: i32 = 2;
 
+/// A dense closed cloud whose noise does not dominate ([`noise_dominates`]) goes one step
+/// further, to every third voxel corner: about half the faces of every second corner (the cube
+/// at 20 mm noise and 50,000 points: 5,396 -> 2,060), so the simplifier's first pass takes
+/// about half the time. Measured on the six shapes at 0-40 mm noise and 5,000-100,000 points,
+/// seeds 101-103 (`cargo bench --bench table1`, the sweep): it applies from 10,000-20,000
+/// points at 0-20 mm, and every such cell is still one closed piece with Table 1's faces and
+/// error, at 0.8-1.35x the error of every second corner (cone at 0 mm from 20,000 points 1.87
+/// -> 2.52 mm at 24 faces; cone at 20 mm from 40,000 points 2.87 -> 2.61 mm, cube at 50,000
+/// points 0.78 -> 0.70 mm) and within eight faces of it (cone at 20 mm from 20,000 points 24
+/// -> 32, torus at 0 mm from 100,000 points 88 -> 80). One core, 50,000 points at 20 mm: cone 31 ->
+/// 27 ms, cube 43 -> 33, cylinder 42 -> 32, sphere 39 -> 31. Suzanne's ears (at 0-10 mm) come
+/// out cut off and the torus's tube (at 20 mm) open on every third corner; reconstruction
+/// makes those again on every second corner (see [`tacmesh_reconstruct::mesh_moment_grid`]),
+/// for about 1 ms. A noisy cloud stays on every second corner: on every third, the torus at 40
+/// mm from 5,000 points had 184 faces.
+pub const DENSE_MESH_STEP_VOXELS: i32 = 3;
+
 /// The coarser marching cubes is for closed objects (no viewpoint), where an open result is
 /// caught and meshed again; a one-view scan is open anyway, and on PCL's stereo mug scene the
 /// coarser mesh turned 76 % of its area to face the camera instead of 85 % or more.
@@ -135,6 +153,16 @@ pub const MESH_STEP_VOXELS: i32 = 2;
 /// [`MAX_NOISE_VOXEL_GROWTH`] times the default) stays within it. A noisy cloud is the
 /// exception: see [`noise_dominates`].
 pub const MAX_MESH_CELL_OF_EXTENT: f32 = 0.06;
+
+/// Every third corner ([`DENSE_MESH_STEP_VOXELS`]) runs only while its cell stays within this
+/// share of the extent, the noise does not dominate and the points' spacing did not grow the
+/// voxel: a thin part drawn by few points (Suzanne's ears from 5,000 points at 0-10 mm) came
+/// out closed and in one piece with the tip of an ear shaved off (Hausdorff 0.15 m, MHE 7.6-8.5
+/// -> 10.1-11.1 mm), which no check of the mesh catches. The noise alone (at most
+/// [`MAX_NOISE_VOXEL_GROWTH`] times the default, 2.8 % of the extent) stays within it; at 8 %
+/// the cone at 20 mm noise (voxel 2.4-2.7 % of its extent) fell on either side from seed to
+/// seed, and 10 % to 20 % gave the same sweep.
+pub const MAX_DENSE_MESH_CELL_OF_EXTENT: f32 = 0.1;
 
 /// Whether a cloud's noise (σ, as [`estimate_noise_m`] finds it) reaches the default voxel
 /// `base_voxel_m`: the noise has then grown the voxel to its cap
@@ -215,8 +243,9 @@ pub struct MeshReport {
     pub points: usize,
     pub extent_m: f32,
     pub voxel_size_m: f32,
-    /// Marching-cubes cell edge used, in voxels (see [`MESH_STEP_VOXELS`]; 1 when the coarser
-    /// mesh of a closed object came out open and was made again on every corner).
+    /// Marching-cubes cell edge used, in voxels (see [`MeshConfig::mesh_step_voxels`]; smaller
+    /// than chosen when the coarser mesh of a closed object came out open or cut in pieces and
+    /// was made again on finer corners).
     pub mesh_step_voxels: i32,
     /// The noise estimated across the surface (standard deviation, metres; see
     /// [`estimate_noise_m`]), 0 when there were too few points to tell.
@@ -450,16 +479,22 @@ pub fn mesh_cloud_with_dense(
         _ => base_voxel_m,
     };
     let max_residual_m = config.max_residual.resolve_m(extent_m);
-    let coarse_fits = noise_dominates(noise_m, base_voxel_m)
-        || MESH_STEP_VOXELS as f32 * voxel_size_m <= MAX_MESH_CELL_OF_EXTENT * extent_m;
-    let mesh_step_voxels =
-        config
-            .mesh_step_voxels
-            .unwrap_or(if coarse_fits && config.viewpoint.is_none() {
-                MESH_STEP_VOXELS
-            } else {
-                1
-            });
+    let cell_fits =
+        |step: i32, max_of_extent: f32| step as f32 * voxel_size_m <= max_of_extent * extent_m;
+    let dense = DENSITY_VOXEL_RATIO * spacing_m <= base_voxel_m;
+    let mesh_step_voxels = config
+        .mesh_step_voxels
+        .unwrap_or(if config.viewpoint.is_some() {
+            1
+        } else if noise_dominates(noise_m, base_voxel_m) {
+            MESH_STEP_VOXELS
+        } else if dense && cell_fits(DENSE_MESH_STEP_VOXELS, MAX_DENSE_MESH_CELL_OF_EXTENT) {
+            DENSE_MESH_STEP_VOXELS
+        } else if cell_fits(MESH_STEP_VOXELS, MAX_MESH_CELL_OF_EXTENT) {
+            MESH_STEP_VOXELS
+        } else {
+            1
+        });
 
     let attempt = |voxel_size_m: f32, mesh_step_voxels: i32| {
         let recon_config = ReconstructConfig {
@@ -758,7 +793,7 @@ mod tests {
     }
 
     #[test]
-    fn a_dense_closed_cloud_is_meshed_on_every_second_corner() {
+    fn a_dense_closed_cloud_is_meshed_on_every_third_corner() {
         let shape = tacmesh_sim::Shape::Sphere;
         let cloud = sampled(shape, 40_000, 0.02, 7);
         let mesh_at = |mesh_step_voxels| {
@@ -774,9 +809,13 @@ mod tests {
         };
         let (coarse, coarse_mhe) = mesh_at(None);
         let (fine, fine_mhe) = mesh_at(Some(1));
-        assert_eq!((coarse.mesh_step_voxels, fine.mesh_step_voxels), (2, 1));
+        assert_eq!(
+            (coarse.mesh_step_voxels, fine.mesh_step_voxels),
+            (DENSE_MESH_STEP_VOXELS, 1)
+        );
+        // About a ninth of the faces; the sphere at seed 7 has 1,924 against 17,000 or so.
         assert!(
-            3 * coarse.recon_faces < fine.recon_faces,
+            6 * coarse.recon_faces < fine.recon_faces,
             "{} vs {} marching-cubes faces",
             coarse.recon_faces,
             fine.recon_faces
@@ -794,14 +833,44 @@ mod tests {
     }
 
     #[test]
+    fn a_noisy_closed_cloud_is_meshed_on_every_second_corner() {
+        let cloud = sampled(tacmesh_sim::Shape::Cube, 20_000, 0.04, 101);
+        let (_, report) = mesh_cloud(&cloud, &MeshConfig::default()).unwrap();
+        let base_voxel_m = DEFAULT_VOXEL_OF_EXTENT * report.extent_m;
+        assert!(noise_dominates(report.noise_m, base_voxel_m), "{report:?}");
+        assert_eq!(report.mesh_step_voxels, MESH_STEP_VOXELS, "{report:?}");
+        assert!(report.closed && report.pieces == 1, "{report:?}");
+    }
+
+    #[test]
+    fn a_thin_part_cut_off_on_every_third_corner_is_made_again_on_every_second() {
+        // Suzanne at 10 mm from 40,000 points: every third corner is chosen and leaves an ear
+        // as a piece of its own (on seeds 1-5); reconstruction makes her again on every second
+        // corner, which keeps her in one.
+        let cloud = sampled(tacmesh_sim::Shape::Monkey, 40_000, 0.01, 1);
+        let (_, report) = mesh_cloud(&cloud, &MeshConfig::default()).unwrap();
+        let base_voxel_m = DEFAULT_VOXEL_OF_EXTENT * report.extent_m;
+        assert!(!noise_dominates(report.noise_m, base_voxel_m), "{report:?}");
+        assert!(
+            DENSE_MESH_STEP_VOXELS as f32 * report.voxel_size_m
+                <= MAX_DENSE_MESH_CELL_OF_EXTENT * report.extent_m
+                && DENSITY_VOXEL_RATIO * report.spacing_m <= base_voxel_m,
+            "every third corner was not chosen: {report:?}"
+        );
+        assert_eq!(report.mesh_step_voxels, MESH_STEP_VOXELS, "{report:?}");
+        assert!(report.closed && report.pieces == 1, "{report:?}");
+        assert_eq!(report.closing_retries, 0, "{report:?}");
+    }
+
+    #[test]
     fn a_coarse_mesh_that_comes_out_open_is_made_again_on_every_corner() {
-        // Suzanne's ears at 40 mm noise from 5,000 points: every second corner leaves holes
-        // there (on seeds 101-103), every corner closes them.
+        // Suzanne's ears at 40 mm noise from 5,000 points: every second corner (the noise
+        // dominates) leaves holes there (on seeds 101-103), every corner closes them.
         let cloud = sampled(tacmesh_sim::Shape::Monkey, 5_000, 0.04, 101);
         let (_, report) = mesh_cloud(&cloud, &MeshConfig::default()).unwrap();
+        let base_voxel_m = DEFAULT_VOXEL_OF_EXTENT * report.extent_m;
         assert!(
-            MESH_STEP_VOXELS as f32 * report.voxel_size_m
-                <= MAX_MESH_CELL_OF_EXTENT * report.extent_m,
+            noise_dominates(report.noise_m, base_voxel_m),
             "the coarser mesh was not tried: {report:?}"
         );
         assert_eq!(report.mesh_step_voxels, 1, "{report:?}");

@@ -42,8 +42,9 @@ pub struct ReconstructConfig {
     /// Marching-cubes cell edge in voxels: the signed distance is sampled on every
     /// `mesh_step_voxels`-th voxel corner (1: every corner), which cuts the dense mesh's faces
     /// about by its square while the planes and their smoothing stay at the voxel's scale. A
-    /// closed object (orientation by propagation) whose coarser mesh comes out open is meshed
-    /// again on every corner (see [`mesh_moment_grid`]).
+    /// closed object (orientation by propagation) whose coarser mesh comes out open (or, from
+    /// every third corner, in pieces) is meshed again on finer corners (see
+    /// [`mesh_moment_grid`]).
     pub mesh_step_voxels: i32,
     pub orientation: Orientation,
     /// Connected pieces with fewer faces than this fraction of the largest piece are noise
@@ -207,13 +208,21 @@ pub fn mesh_moment_grid(
     // A closed object sampled too coarsely comes out with holes: a thin part (Suzanne's ears at
     // 40 mm noise from 5,000-10,000 points), or a crossed cell with a corner beyond every
     // plane's kernel (the torus's rim at 20 mm from 5,000-10,000 points). Mesh it again on
-    // every corner, which costs the coarse try's signed distance and marching cubes (a
-    // quarter of the fine ones). Giving such corners the nearest plane's distance instead
-    // closed the torus but thickened Suzanne's ears (MHE at 20 mm 10.5 -> 13.0 mm).
+    // finer corners, which costs the coarse try's signed distance and marching cubes (a
+    // quarter of the fine ones or less). Giving such corners the nearest plane's distance
+    // instead closed the torus but thickened Suzanne's ears (MHE at 20 mm 10.5 -> 13.0 mm).
+    // From every third corner a thin part can also come out closed but cut off (Suzanne's
+    // ears at 0-10 mm from 40,000 points) or open (the torus's tube at 20 mm): every second
+    // corner, tried first, closes both, and every corner is the last resort.
     let closed_object = config.orientation == Orientation::Propagate;
-    if config.mesh_step_voxels > 1 && closed_object && mesh.has_open_edge() {
-        let fine = config.with_mesh_step(1);
-        mesh = surface_of_planes(&planes, grid.voxel_size_m(), &fine, &mut report);
+    let mut step = config.mesh_step_voxels;
+    while step > 1
+        && closed_object
+        && (mesh.has_open_edge() || (step > 2 && mesh.face_pieces().1 > 1))
+    {
+        step = if step > 2 { 2 } else { 1 };
+        let finer = config.with_mesh_step(step);
+        mesh = surface_of_planes(&planes, grid.voxel_size_m(), &finer, &mut report);
     }
     report.faces = mesh.triangles.len();
     Ok(Reconstruction {

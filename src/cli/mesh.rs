@@ -26,10 +26,11 @@ pub struct MeshArgs {
     /// the README)]
     #[arg(long)]
     voxel_m: Option<f32>,
-    /// Marching-cubes cell edge in voxels, 1 to 4 [default: 2 for a cloud with no viewpoint
-    /// while the cell stays within 6 % of its largest side or the noise reaches the default
-    /// voxel, else 1; a closed object whose
-    /// coarser mesh comes out open is meshed again with 1]
+    /// Marching-cubes cell edge in voxels, 1 to 4 [default, for a cloud with no viewpoint: 2
+    /// when the noise reaches the default voxel, 3 for a dense cloud (the cell within 10 % of
+    /// its largest side), 2 while the cell stays within 6 % of it, else 1; 1 with a viewpoint. A
+    /// closed object whose coarser mesh comes out open (or, on 3, in pieces) is meshed again on
+    /// finer corners]
     #[arg(long, value_name = "VOXELS", value_parser = clap::value_parser!(i32).range(1..=4))]
     mesh_step_voxels: Option<i32>,
     /// Residual bound in metres: how far simplification may move the surface [default: 2.5 % of
