@@ -63,8 +63,9 @@ pub struct MeshConfig {
     /// Marching-cubes cell edge in voxels (the signed distance is sampled on every this-many
     /// voxel corner); `None` picks, for a cloud with no viewpoint, [`MESH_STEP_VOXELS`] when the
     /// noise dominates ([`noise_dominates`]), else [`DENSE_MESH_STEP_VOXELS`] for a dense cloud
-    /// (see [`MAX_DENSE_MESH_CELL_OF_EXTENT`]), else [`MESH_STEP_VOXELS`] while its cell stays
-    /// within [`MAX_MESH_CELL_OF_EXTENT`] of the extent, else 1; and 1 for a one-view scan.
+    /// ([`points_are_dense`], see [`MAX_DENSE_MESH_CELL_OF_EXTENT`]), else
+    /// [`MESH_STEP_VOXELS`] while its cell stays within [`MAX_MESH_CELL_OF_EXTENT`] of the
+    /// extent, else 1; and 1 for a one-view scan.
     pub mesh_step_voxels: Option<i32>,
 }
 
@@ -110,6 +111,12 @@ pub const DENSITY_VOXEL_RATIO: f32 = 1.35;
 
 /// The spacing never grows the voxel beyond this multiple of the relative default.
 pub const MAX_DENSITY_VOXEL_GROWTH: f32 = 2.5;
+
+/// Whether points `spacing_m` apart are dense enough that their spacing does not grow the
+/// default voxel `base_voxel_m` (see [`DENSITY_VOXEL_RATIO`]).
+pub fn points_are_dense(spacing_m: f32, base_voxel_m: f32) -> bool {
+    DENSITY_VOXEL_RATIO * spacing_m <= base_voxel_m
+}
 
 /// Default voxel: 1/50 of the object's extent (2 cm for the paper's 1 m shapes).
 pub const DEFAULT_VOXEL_OF_EXTENT: f32 = 0.02;
@@ -481,14 +488,15 @@ pub fn mesh_cloud_with_dense(
     let max_residual_m = config.max_residual.resolve_m(extent_m);
     let cell_fits =
         |step: i32, max_of_extent: f32| step as f32 * voxel_size_m <= max_of_extent * extent_m;
-    let dense = DENSITY_VOXEL_RATIO * spacing_m <= base_voxel_m;
     let mesh_step_voxels = config
         .mesh_step_voxels
         .unwrap_or(if config.viewpoint.is_some() {
             1
         } else if noise_dominates(noise_m, base_voxel_m) {
             MESH_STEP_VOXELS
-        } else if dense && cell_fits(DENSE_MESH_STEP_VOXELS, MAX_DENSE_MESH_CELL_OF_EXTENT) {
+        } else if points_are_dense(spacing_m, base_voxel_m)
+            && cell_fits(DENSE_MESH_STEP_VOXELS, MAX_DENSE_MESH_CELL_OF_EXTENT)
+        {
             DENSE_MESH_STEP_VOXELS
         } else if cell_fits(MESH_STEP_VOXELS, MAX_MESH_CELL_OF_EXTENT) {
             MESH_STEP_VOXELS
@@ -854,7 +862,7 @@ mod tests {
         assert!(
             DENSE_MESH_STEP_VOXELS as f32 * report.voxel_size_m
                 <= MAX_DENSE_MESH_CELL_OF_EXTENT * report.extent_m
-                && DENSITY_VOXEL_RATIO * report.spacing_m <= base_voxel_m,
+                && points_are_dense(report.spacing_m, base_voxel_m),
             "every third corner was not chosen: {report:?}"
         );
         assert_eq!(report.mesh_step_voxels, MESH_STEP_VOXELS, "{report:?}");

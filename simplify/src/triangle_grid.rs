@@ -76,6 +76,59 @@ const MAX_WALKED_CELLS: i64 = 64;
 const BLOCK_SHIFT: i32 = 3;
 const BLOCK_CELLS: i32 = 1 << BLOCK_SHIFT;
 
+/// The centre of grid cell `cell` of `cell_m` cubes.
+fn centre_of(cell: IVec3, cell_m: f32) -> Vec3 {
+    (cell.as_vec3() + 0.5) * cell_m
+}
+
+/// Which cells one triangle can be within `cell_m` of: those in its bounding box grown by
+/// `cell_m` whose centre is near its plane (see [`TriangleReach::near_plane`]).
+struct TriangleReach {
+    a: Vec3,
+    normal: Vec3,
+    /// The grown box, in cells.
+    lo: IVec3,
+    hi: IVec3,
+    /// How far from the plane a cell's centre may be.
+    plane_reach: f32,
+}
+
+impl TriangleReach {
+    fn new([a, b, c]: [Vec3; 3], cell_m: f32) -> Self {
+        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
+        Self {
+            a,
+            normal: (b - a).cross(c - a).normalize_or_zero(),
+            lo: cell_of(a.min(b).min(c) - cell_m),
+            hi: cell_of(a.max(b).max(c) + cell_m),
+            // A point within `cell_m` of the triangle is within `cell_m` of its plane, and the
+            // cell's centre within half the diagonal of the point; a little more for rounding.
+            plane_reach: cell_m * (1.0 + 0.5 * 3f32.sqrt()) * 1.001,
+        }
+    }
+
+    /// How many cells the grown box spans.
+    fn box_cells(&self) -> i64 {
+        let span = (self.hi.as_i64vec3() - self.lo.as_i64vec3() + 1).max(I64Vec3::ZERO);
+        span.x.saturating_mul(span.y).saturating_mul(span.z)
+    }
+
+    /// Whether `centre` is within the cells' reach plus `extra_reach` of the plane, with a
+    /// margin for rounding relative to how far from the origin it and the triangle are.
+    fn near_plane(&self, centre: Vec3, extra_reach: f32) -> bool {
+        let rounding = |p: Vec3| 16.0 * f32::EPSILON * p.abs().max_element();
+        self.normal.dot(centre - self.a).abs()
+            <= self.plane_reach + extra_reach + rounding(centre) + rounding(self.a)
+    }
+
+    /// Whether the triangle can be within `cell_m` of a point in `cell`.
+    fn reaches(&self, cell: IVec3, cell_m: f32) -> bool {
+        cell.cmpge(self.lo).all()
+            && cell.cmple(self.hi).all()
+            && self.near_plane(centre_of(cell, cell_m), 0.0)
+    }
+}
+
 impl PointCells {
     /// The cells of `points` (non-finite ones have none). `cell_m` must be positive.
     pub(crate) fn new(points: impl Iterator<Item = Vec3>, cell_m: f32) -> Self {
@@ -130,34 +183,25 @@ impl PointCells {
     /// within `cell_m` of (see [`PointCells`]).
     pub(crate) fn bucket(&self, triangles: impl Iterator<Item = [Vec3; 3]>) -> CellLists {
         let cell_m = self.cell_m;
-        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
         // (cell slot, triangle), in triangle order; sorted by slot below, stably, so that each
         // cell lists its triangles in ascending order.
         let mut pairs: Vec<(u32, u32)> = Vec::new();
-        // A point within `cell_m` of the triangle is within `cell_m` of its plane, and the
-        // cell's centre within half the diagonal of the point; a little more for rounding,
-        // relative to the cell and to how far from the origin it is.
-        let plane_reach = cell_m * (1.0 + 0.5 * 3f32.sqrt()) * 1.001;
-        let centre_of = |cell: IVec3| (cell.as_vec3() + 0.5) * cell_m;
-        let rounding = |centre: Vec3| 16.0 * f32::EPSILON * centre.abs().max_element();
-        for (t, [a, b, c]) in triangles.enumerate() {
+        // A cell of a block reaches the triangle's plane only if the block's centre is within
+        // the cells' reach plus the distance from it to the farthest cell centre
+        // ((BLOCK_CELLS - 1) / 2 cells on each axis); the cells of a block that passes are
+        // tested one by one.
+        let block_extra_reach = 0.5 * (BLOCK_CELLS - 1) as f32 * 3f32.sqrt() * cell_m * 1.001;
+        for (t, corners) in triangles.enumerate() {
             let t = t as u32;
-            let normal = (b - a).cross(c - a).normalize_or_zero();
-            let near_plane = |cell: IVec3| {
-                let centre = centre_of(cell);
-                normal.dot(centre - a).abs() <= plane_reach + rounding(centre) + rounding(a)
-            };
-            let lo = cell_of(a.min(b).min(c) - cell_m);
-            let hi = cell_of(a.max(b).max(c) + cell_m);
-            let span = (hi.as_i64vec3() - lo.as_i64vec3() + 1).max(I64Vec3::ZERO);
-            let box_cells = span.x.saturating_mul(span.y).saturating_mul(span.z);
-            if box_cells <= MAX_WALKED_CELLS {
+            let reach = TriangleReach::new(corners, cell_m);
+            let (lo, hi) = (reach.lo, reach.hi);
+            if reach.box_cells() <= MAX_WALKED_CELLS {
                 for z in lo.z..=hi.z {
                     for y in lo.y..=hi.y {
                         for x in lo.x..=hi.x {
                             let cell = IVec3::new(x, y, z);
                             if let Some(&slot) = self.index.get(&cell) {
-                                if near_plane(cell) {
+                                if reach.near_plane(centre_of(cell, cell_m), 0.0) {
                                     pairs.push((slot, t));
                                 }
                             }
@@ -165,25 +209,17 @@ impl PointCells {
                     }
                 }
             } else {
-                // A cell of the block passes the plane test only if the block's centre is
-                // within the cells' reach plus the distance from it to the farthest cell
-                // centre ((BLOCK_CELLS - 1) / 2 cells on each axis); the cells of a block that
-                // passes are tested exactly as before.
-                let block_reach =
-                    plane_reach + 0.5 * (BLOCK_CELLS - 1) as f32 * 3f32.sqrt() * cell_m * 1.001;
                 for block in &self.blocks {
                     let last_cell = block.first_cell + (BLOCK_CELLS - 1);
                     if block.first_cell.cmpgt(hi).any() || last_cell.cmplt(lo).any() {
                         continue;
                     }
                     let centre = (block.first_cell.as_vec3() + 0.5 * BLOCK_CELLS as f32) * cell_m;
-                    let reach = block_reach + rounding(centre) + rounding(a);
-                    if normal.dot(centre - a).abs() > reach {
+                    if !reach.near_plane(centre, block_extra_reach) {
                         continue;
                     }
                     for &slot in &self.block_slots[block.from as usize..block.to as usize] {
-                        let cell = self.occupied[slot as usize];
-                        if cell.cmpge(lo).all() && cell.cmple(hi).all() && near_plane(cell) {
+                        if reach.reaches(self.occupied[slot as usize], cell_m) {
                             pairs.push((slot, t));
                         }
                     }
@@ -234,17 +270,24 @@ mod tests {
     use super::*;
     use crate::point_triangle::TriangleQuery;
 
-    /// Large triangles find the same cells through the blocks as by testing every occupied
-    /// cell, box and plane, as [`PointCells::bucket`] did before it had blocks.
-    #[test]
-    fn blocks_list_the_same_cells_as_a_test_of_every_cell() {
-        let mut state = 0x9e37_79b9_u32;
-        let mut next = move || {
+    /// A small deterministic generator of numbers in [0, 1] (xorshift): the tests need
+    /// spread, not statistics.
+    fn numbers_from(seed: u32) -> impl FnMut() -> f32 {
+        let mut state = seed;
+        move || {
             state ^= state << 13;
             state ^= state >> 17;
             state ^= state << 5;
             state as f32 / u32::MAX as f32
-        };
+        }
+    }
+
+    /// Large triangles find the same cells through the blocks as [`TriangleReach::reaches`]
+    /// asked of every occupied cell, which is what [`PointCells::bucket`] did before it had
+    /// blocks.
+    #[test]
+    fn blocks_list_the_same_cells_as_a_test_of_every_cell() {
+        let mut next = numbers_from(0x9e37_79b9);
         for offset in [Vec3::ZERO, Vec3::new(-250.0, 80.0, 40.0)] {
             let mut random_point = |scale: f32| Vec3::new(next(), next(), next()) * scale;
             // Points on and around a sphere's shell, as a simplifier's held points are.
@@ -268,27 +311,13 @@ mod tests {
             let cells = PointCells::new(points.iter().copied(), cell_m);
             assert!(cells.blocks.len() > 20, "{} blocks", cells.blocks.len());
             let lists = cells.bucket(triangles.iter().copied());
-            let centre_of = |cell: IVec3| (cell.as_vec3() + 0.5) * cell_m;
-            let rounding = |centre: Vec3| 16.0 * f32::EPSILON * centre.abs().max_element();
-            let plane_reach = cell_m * (1.0 + 0.5 * 3f32.sqrt()) * 1.001;
             let mut listed = 0;
             for (slot, &cell) in cells.occupied.iter().enumerate() {
                 let expected: Vec<u32> = triangles
                     .iter()
                     .enumerate()
-                    .filter(|(_, [a, b, c])| {
-                        let normal = (*b - *a).cross(*c - *a).normalize_or_zero();
-                        let lo = (((*a).min(*b).min(*c) - cell_m) / cell_m)
-                            .floor()
-                            .as_ivec3();
-                        let hi = (((*a).max(*b).max(*c) + cell_m) / cell_m)
-                            .floor()
-                            .as_ivec3();
-                        let centre = centre_of(cell);
-                        cell.cmpge(lo).all()
-                            && cell.cmple(hi).all()
-                            && normal.dot(centre - *a).abs()
-                                <= plane_reach + rounding(centre) + rounding(*a)
+                    .filter(|(_, &corners)| {
+                        TriangleReach::new(corners, cell_m).reaches(cell, cell_m)
                     })
                     .map(|(t, _)| t as u32)
                     .collect();
@@ -304,19 +333,12 @@ mod tests {
     }
 
     /// Every triangle within `cell_m` of a point is listed in its cell, for triangles small
-    /// (their box walked), middling and large (tested against each occupied cell) against the
+    /// (their box walked), middling and large (tested through the blocks) against the
     /// cell, near the origin and 100 m from it.
     #[test]
     fn a_cell_lists_every_triangle_within_reach() {
         for offset in [Vec3::ZERO, Vec3::new(100.0, -60.0, 30.0)] {
-            // A small deterministic generator: the test needs spread, not statistics.
-            let mut state = 0x2545_f491_u32;
-            let mut next = move || {
-                state ^= state << 13;
-                state ^= state >> 17;
-                state ^= state << 5;
-                state as f32 / u32::MAX as f32
-            };
+            let mut next = numbers_from(0x2545_f491);
             let mut random_point = |scale: f32| Vec3::new(next(), next(), next()) * scale;
             let triangles: Vec<[Vec3; 3]> = (0..90)
                 .map(|i| {
