@@ -31,7 +31,7 @@ impl MomentGrid {
 
     /// The voxel holding `p`.
     pub fn cell_of(&self, p: Vec3) -> IVec3 {
-        (p / self.voxel_size_m).floor().as_ivec3()
+        tacmesh_source::floor_ivec3(p / self.voxel_size_m)
     }
 
     /// Adds finite points to their voxels; returns how many were added.

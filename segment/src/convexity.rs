@@ -36,9 +36,9 @@ use std::collections::BinaryHeap;
 use glam::{DMat4, DVec4, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::grid::floor_i32;
 use crate::links::Links as CellLinks;
 use crate::planes::fit_plane;
+use tacmesh_source::floor_i32;
 
 /// The settings of [`split_at_concave_creases`].
 #[derive(Debug, Clone, Copy)]

@@ -9,6 +9,7 @@
 
 use glam::Vec3;
 use rustc_hash::FxHashMap;
+use tacmesh_source::floor_i32;
 
 type Cell = [i32; 3];
 
@@ -27,19 +28,6 @@ pub struct VoxelGrid {
 
 /// Flipping the sign bit orders `i32`s as `u32`s.
 const SIGN: u32 = 1 << 31;
-
-/// `x.floor() as i32`, saturating as that cast does (NaN to 0), without a call to `floorf`:
-/// the baseline x86-64 target has no rounding instruction, and the grids key every point.
-#[inline]
-pub(crate) fn floor_i32(x: f32) -> i32 {
-    let truncated = x as i32;
-    // Truncation rounds negative non-integers up; beyond ±2^31 both saturate alike.
-    if x < truncated as f32 {
-        truncated.saturating_sub(1)
-    } else {
-        truncated
-    }
-}
 
 /// The grid cell of `p`. Coordinates beyond `i32` saturate, which only merges cells of absurdly
 /// distant points.
@@ -211,35 +199,6 @@ impl Neighbourhoods {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn floor_i32_is_floor_then_a_saturating_cast() {
-        let values = [
-            0.0,
-            -0.0,
-            0.5,
-            -0.5,
-            1.0,
-            -1.0,
-            -1.5,
-            2.999_999_8,
-            -2.999_999_8,
-            8_388_607.5,
-            -8_388_607.5,
-            2_147_483_520.0,
-            -2_147_483_648.0,
-            3e9,
-            -3e9,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-            f32::MIN_POSITIVE,
-            -f32::MIN_POSITIVE,
-        ];
-        for x in values {
-            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
-        }
-    }
 
     #[test]
     fn a_cell_sees_what_each_of_its_points_sees() {

@@ -22,8 +22,8 @@ use glam::{DMat3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use tacmesh_reconstruct::moments::least_spread_direction;
 
-use crate::grid::floor_i32;
 use crate::range::RangeDistance;
+use tacmesh_source::floor_i32;
 
 /// How many hypotheses RANSAC tries per plane. With a plane holding a fraction `w` of the
 /// candidates, the chance that none of `k` samples is all-inlier is `(1 - w³)^k`: for `w = 0.3`

@@ -10,8 +10,8 @@
 use glam::{DVec3, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::grid::floor_i32;
 use crate::range::RangeDistance;
+use tacmesh_source::floor_i32;
 
 /// The occupied cells of a set of points.
 pub(crate) struct Cells {

@@ -4,6 +4,7 @@
 
 use glam::{I64Vec3, IVec3, Vec3};
 use rustc_hash::FxHashMap;
+use tacmesh_source::floor_ivec3;
 
 /// The occupied cells of a fixed set of query points in a uniform grid of `cell_m` cubes, found
 /// once and then bucketed against mesh after mesh (the fit moves the same mesh's vertices and
@@ -95,7 +96,7 @@ struct TriangleReach {
 
 impl TriangleReach {
     fn new([a, b, c]: [Vec3; 3], cell_m: f32) -> Self {
-        let cell_of = |p: Vec3| (p / cell_m).floor().as_ivec3();
+        let cell_of = |p: Vec3| floor_ivec3(p / cell_m);
         Self {
             a,
             normal: (b - a).cross(c - a).normalize_or_zero(),
@@ -139,7 +140,7 @@ impl PointCells {
                 if !p.is_finite() {
                     return NO_CELL;
                 }
-                let cell = (p / cell_m).floor().as_ivec3();
+                let cell = floor_ivec3(p / cell_m);
                 *index.entry(cell).or_insert_with(|| {
                     occupied.push(cell);
                     (occupied.len() - 1) as u32
@@ -249,7 +250,7 @@ impl PointCells {
     /// ascending.
     #[cfg(test)]
     pub(crate) fn near<'l>(&self, lists: &'l CellLists, p: Vec3) -> &'l [u32] {
-        let cell = (p / self.cell_m).floor().as_ivec3();
+        let cell = floor_ivec3(p / self.cell_m);
         self.index
             .get(&cell)
             .map_or(&[], |&slot| lists.of_slot(slot))

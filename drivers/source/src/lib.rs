@@ -6,6 +6,7 @@
 //! - [`PointCloud`]: points (and optional normals) in metres, in one named frame; with a
 //!   [`CloudGrid`] when it is organised.
 //! - [`TriMesh`]: an indexed triangle mesh in metres.
+//! - [`floor_i32`], [`floor_ivec3`]: grid indices of coordinates, without a call to `floorf`.
 //! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read;
 //!   [`realtime_now_ns`], [`realtime_of`]: the wall clock, for clients on other hosts.
 //!
@@ -14,12 +15,14 @@
 
 mod clock;
 mod cloud;
+mod floor;
 mod frame;
 mod mesh;
 mod source;
 
 pub use clock::{monotonic_now, realtime_now_ns, realtime_of};
 pub use cloud::{CloudGrid, PointCloud};
+pub use floor::{floor_i32, floor_ivec3};
 pub use frame::{Deprojection, DepthFrame, FrameError, Intrinsics};
 pub use mesh::TriMesh;
 pub use source::{DepthSource, Observation, SourceError};
