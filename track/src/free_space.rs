@@ -27,6 +27,7 @@
 //! would stay for ever.
 
 use glam::{Affine3A, Vec3};
+use tacmesh_source::floor_i32;
 
 /// Angular width of a bin, radians: about two pixels of a 640-wide VGA depth camera, so a bin
 /// holds a few measurements and one missing pixel does not leave a hole in the image.
@@ -80,16 +81,19 @@ impl FreeSpace {
     /// points behind the sensor are skipped.
     pub fn from_points(points_in_world: &[Vec3], world_from_sensor: Affine3A) -> Self {
         let sensor_from_world = world_from_sensor.inverse();
-        // Projected once: the first pass sizes the image, the second fills it.
-        let projected: Vec<(f32, f32, f32)> = points_in_world
-            .iter()
-            .filter_map(|&p| project(&sensor_from_world, p))
-            .filter(|&(tx, ty, _)| tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN)
-            .collect();
+        // Projected once, and the image's bounds found in the same pass: the first pass sizes
+        // the image, the second fills it.
         let (mut lo, mut hi) = ((MAX_TAN, MAX_TAN), (-MAX_TAN, -MAX_TAN));
-        for &(tx, ty, _) in &projected {
-            lo = (lo.0.min(tx), lo.1.min(ty));
-            hi = (hi.0.max(tx), hi.1.max(ty));
+        let mut projected: Vec<(f32, f32, f32)> = Vec::with_capacity(points_in_world.len());
+        for &p in points_in_world {
+            let Some((tx, ty, z)) = project(&sensor_from_world, p) else {
+                continue;
+            };
+            if tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN {
+                lo = (lo.0.min(tx), lo.1.min(ty));
+                hi = (hi.0.max(tx), hi.1.max(ty));
+                projected.push((tx, ty, z));
+            }
         }
         if projected.is_empty() {
             return Self {
@@ -106,11 +110,11 @@ impl FreeSpace {
         let span = (hi.0 - lo.0).max(hi.1 - lo.1).max(BIN_RAD);
         let bins_per_tan = (1.0 / BIN_RAD).min(MAX_BINS as f32 / span);
         let origin = (
-            -(lo.0 * bins_per_tan).floor() as i32,
-            -(lo.1 * bins_per_tan).floor() as i32,
+            -floor_i32(lo.0 * bins_per_tan),
+            -floor_i32(lo.1 * bins_per_tan),
         );
-        let width = ((hi.0 * bins_per_tan).floor() as i32 + origin.0 + 1).max(1) as usize;
-        let height = ((hi.1 * bins_per_tan).floor() as i32 + origin.1 + 1).max(1) as usize;
+        let width = (floor_i32(hi.0 * bins_per_tan) + origin.0 + 1).max(1) as usize;
+        let height = (floor_i32(hi.1 * bins_per_tan) + origin.1 + 1).max(1) as usize;
         let mut image = Self {
             sensor_from_world,
             sensor_in_world: world_from_sensor.translation.into(),
@@ -121,11 +125,11 @@ impl FreeSpace {
             nearest_m: vec![f32::INFINITY; width * height],
             supports: Vec::new(),
         };
+        // Every projected direction is within the bounds, so inside the image.
         for (tx, ty, z) in projected {
-            if let Some(bin) = image.bin(tx, ty) {
-                let nearest = &mut image.nearest_m[bin];
-                *nearest = nearest.min(z);
-            }
+            let bin = image.bin_within(tx, ty);
+            let nearest = &mut image.nearest_m[bin];
+            *nearest = nearest.min(z);
         }
         image
     }
@@ -134,12 +138,19 @@ impl FreeSpace {
         if !(tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN) {
             return None;
         }
-        let u = (tx * self.bins_per_tan).floor() as i32 + self.origin.0;
-        let v = (ty * self.bins_per_tan).floor() as i32 + self.origin.1;
+        let u = floor_i32(tx * self.bins_per_tan) + self.origin.0;
+        let v = floor_i32(ty * self.bins_per_tan) + self.origin.1;
         if u < 0 || v < 0 || u as usize >= self.width || v as usize >= self.height {
             return None;
         }
         Some(v as usize * self.width + u as usize)
+    }
+
+    /// The bin of a direction known to lie within the image's bounds (one that sized it).
+    fn bin_within(&self, tx: f32, ty: f32) -> usize {
+        let u = floor_i32(tx * self.bins_per_tan) + self.origin.0;
+        let v = floor_i32(ty * self.bins_per_tan) + self.origin.1;
+        v as usize * self.width + u as usize
     }
 
     /// Whether the frame saw past `p_in_world`: the nearest surface measured in its direction
