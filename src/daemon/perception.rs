@@ -68,9 +68,8 @@ enum Segmented {
 struct FrameWork {
     capture_time: Duration,
     viewpoint: Vec3,
-    world_from_sensor: glam::Affine3A,
-    /// Every valid point of the frame, world frame: the free space is built from them all.
-    points: Vec<Vec3>,
+    /// What the frame saw through, from all its points (planes and background included).
+    free_space: FreeSpace,
     clusters: Vec<Vec<Vec3>>,
     supports: Vec<SupportPlane>,
 }
@@ -198,20 +197,22 @@ impl Segmenting {
     fn process(&mut self, shared: &Shared, observation: Observation) -> Option<FrameWork> {
         let counters = &shared.counters;
         let started = Instant::now();
-        let (points, organised, capture_time, world_from_sensor) = match observation {
+        let (points, organised, capture_time, world_from_sensor, free_space) = match observation {
             Observation::Depth(frame) => {
                 if let Err(err) = frame.check() {
                     self.malformed(shared, &err);
                     return None;
                 }
                 self.malformed_logged = false;
-                let deprojection = frame.deproject_organised(shared.config.pipeline.max_range_m);
+                let max_range_m = shared.config.pipeline.max_range_m;
+                let deprojection = frame.deproject_organised(max_range_m);
                 Counters::add(&counters.invalid_pixels, deprojection.invalid_pixels as u64);
                 (
                     deprojection.points_in_world,
                     Some((frame.intrinsics.width, frame.intrinsics.height)),
                     frame.capture_time,
                     frame.world_from_sensor,
+                    FreeSpace::from_depth(&frame, max_range_m),
                 )
             }
             Observation::Cloud {
@@ -239,7 +240,14 @@ impl Segmenting {
                     Counters::add(&counters.invalid_pixels, missing as u64);
                 }
                 let organised = grid.map(|g| (g.width, g.height));
-                (points, organised, capture_time, world_from_sensor)
+                let free_space = FreeSpace::from_points(&points, world_from_sensor);
+                (
+                    points,
+                    organised,
+                    capture_time,
+                    world_from_sensor,
+                    free_space,
+                )
             }
         };
         let viewpoint = Vec3::from(world_from_sensor.translation);
@@ -302,8 +310,7 @@ impl Segmenting {
         Some(FrameWork {
             capture_time,
             viewpoint,
-            world_from_sensor,
-            points,
+            free_space,
             clusters,
             supports: segmentation.planes,
         })
@@ -330,8 +337,7 @@ impl Fusing {
         let FrameWork {
             capture_time,
             viewpoint,
-            world_from_sensor,
-            points,
+            free_space,
             clusters,
             supports,
         } = frame;
@@ -341,8 +347,7 @@ impl Fusing {
             viewpoint_m: viewpoint,
             clusters,
             free_space: Some(
-                FreeSpace::from_points(&points, world_from_sensor)
-                    .with_supports(supports.iter().map(|s| (s.normal, s.offset_m))),
+                free_space.with_supports(supports.iter().map(|s| (s.normal, s.offset_m))),
             ),
         });
         counters.record(Stage::Integrate, started.elapsed());

@@ -33,9 +33,9 @@ pub struct FrameClusters {
     pub viewpoint_m: Vec3,
     /// World points of each segmented object, metres. Non-finite points are skipped.
     pub clusters: Vec<Vec<Vec3>>,
-    /// What the frame saw through ([`FreeSpace::from_points`] of all its points, planes and
-    /// background included): fused voxels it sees past are forgotten. `None` forgets nothing
-    /// (a sensor whose rays are unknown).
+    /// What the frame saw through ([`FreeSpace::from_depth`] or [`FreeSpace::from_points`] of
+    /// all its points, planes and background included): fused voxels it sees past are
+    /// forgotten. `None` forgets nothing (a sensor whose rays are unknown).
     pub free_space: Option<FreeSpace>,
 }
 
