@@ -289,7 +289,9 @@ pub struct MeshSection {
     /// distance on every second voxel corner, for a quarter of the faces to simplify. Default 1.
     pub mesh_step_voxels: i32,
     /// Threads meshing objects side by side. Default 2: when several objects change at
-    /// once, the second keeps their new meshes from queueing behind each other.
+    /// once, the second keeps their new meshes from queueing behind each other. Each has a
+    /// thread pool of its own for a run's parallel stages (as many threads as cores, or
+    /// `RAYON_NUM_THREADS`), idle between runs.
     pub workers: usize,
 }
 
