@@ -136,8 +136,8 @@ impl FreeSpace {
         let binned_rows = || (0..height).filter(|&v| row_read[v] && binned(tan_y[v]));
         let binned_columns = || (0..width).filter(|&u| column_read[u] && binned(tan_x[u]));
         // The bounds of the binned rows and columns with a reading: those of the pixels with
-        // one, but where a column's only readings lie in rows beyond `MAX_TAN` (a view wider
-        // than 143°), which only widens the image.
+        // one, but where a row's (a column's) only readings lie in columns (rows) beyond
+        // `MAX_TAN`, in a view wider than 143°; that only widens the image.
         let mut bounds = TangentBounds::EMPTY;
         for v in binned_rows() {
             bounds.lo.1 = bounds.lo.1.min(tan_y[v]);
