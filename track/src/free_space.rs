@@ -117,8 +117,7 @@ impl FreeSpace {
     pub fn from_depth(frame: &DepthFrame, max_range_m: f32) -> Self {
         let k = frame.intrinsics;
         let (width, height) = (k.width as usize, k.height as usize);
-        let tan_x: Vec<f32> = (0..width).map(|u| (u as f32 - k.cx) / k.fx).collect();
-        let tan_y: Vec<f32> = (0..height).map(|v| (v as f32 - k.cy) / k.fy).collect();
+        let (tan_x, tan_y) = (k.column_rays(), k.row_rays());
         let binned = |t: f32| t.abs() <= MAX_TAN;
         let reading = |z: f32| z > 0.0 && z <= max_range_m;
         // The columns and rows holding a reading (a short buffer's missing pixels hold none).
@@ -133,7 +132,8 @@ impl FreeSpace {
             }
         }
         // Only directions both of whose tangents are binned count, as for points.
-        let binned_rows = || (0..height).filter(|&v| row_read[v] && binned(tan_y[v]));
+        let row_binned = |v: usize| row_read[v] && binned(tan_y[v]);
+        let binned_rows = || (0..height).filter(|&v| row_binned(v));
         let binned_columns = || (0..width).filter(|&u| column_read[u] && binned(tan_x[u]));
         // The bounds of the binned rows and columns with a reading: those of the pixels with
         // one, but where a row's (a column's) only readings lie in columns (rows) beyond
@@ -156,14 +156,13 @@ impl FreeSpace {
         // row's bins (the bounds hold them all, so they are inside the image).
         let mut columns = vec![NO_BIN; width];
         for u in binned_columns() {
-            columns[u] = (floor_i32(tan_x[u] * image.bins_per_tan) + image.origin.0) as u32;
+            columns[u] = image.bin_along(tan_x[u], image.origin.0) as u32;
         }
         for (v, row) in rows().enumerate() {
-            if !(row_read[v] && binned(tan_y[v])) {
+            if !row_binned(v) {
                 continue;
             }
-            let start =
-                (floor_i32(tan_y[v] * image.bins_per_tan) + image.origin.1) as usize * image.width;
+            let start = image.bin_along(tan_y[v], image.origin.1) as usize * image.width;
             for (&z, &column) in row.iter().zip(&columns) {
                 if column != NO_BIN && reading(z) {
                     let nearest = &mut image.nearest_m[start + column as usize];
@@ -215,8 +214,10 @@ impl FreeSpace {
         if !(tx.abs() <= MAX_TAN && ty.abs() <= MAX_TAN) {
             return None;
         }
-        let u = floor_i32(tx * self.bins_per_tan) + self.origin.0;
-        let v = floor_i32(ty * self.bins_per_tan) + self.origin.1;
+        let (u, v) = (
+            self.bin_along(tx, self.origin.0),
+            self.bin_along(ty, self.origin.1),
+        );
         if u < 0 || v < 0 || u as usize >= self.width || v as usize >= self.height {
             return None;
         }
@@ -225,9 +226,14 @@ impl FreeSpace {
 
     /// The bin of a direction known to lie within the image's bounds (one that sized it).
     fn bin_within(&self, tx: f32, ty: f32) -> usize {
-        let u = floor_i32(tx * self.bins_per_tan) + self.origin.0;
-        let v = floor_i32(ty * self.bins_per_tan) + self.origin.1;
+        let u = self.bin_along(tx, self.origin.0);
+        let v = self.bin_along(ty, self.origin.1);
         v as usize * self.width + u as usize
+    }
+
+    /// The bin column (row) of tangent `t` along x (y), whose tangent 0 is bin `origin`.
+    fn bin_along(&self, t: f32, origin: i32) -> i32 {
+        floor_i32(t * self.bins_per_tan) + origin
     }
 
     /// Whether the frame saw past `p_in_world`: the nearest surface measured in its direction

@@ -31,6 +31,21 @@ impl Intrinsics {
     pub fn ray(&self, u: f32, v: f32) -> Vec3 {
         Vec3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0)
     }
+
+    /// The x of [`ray`](Self::ray) through each column, `(u - cx) / fx`: the same values, for
+    /// a pass over the whole image that should not divide per pixel.
+    pub fn column_rays(&self) -> Vec<f32> {
+        (0..self.width)
+            .map(|u| (u as f32 - self.cx) / self.fx)
+            .collect()
+    }
+
+    /// The y of [`ray`](Self::ray) through each row, `(v - cy) / fy`.
+    pub fn row_rays(&self) -> Vec<f32> {
+        (0..self.height)
+            .map(|v| (v as f32 - self.cy) / self.fy)
+            .collect()
+    }
 }
 
 /// One organised depth image, row-major, `depth_m[v * width + u]` in metres along the optical
@@ -132,12 +147,10 @@ impl DepthFrame {
             points_in_world: Vec::with_capacity(pixels),
             invalid_pixels: 0,
         };
-        // The rays' x per column and y per row, computed once each: the same values as
-        // `Intrinsics::ray`, without two divisions and a division of the index per pixel.
-        let Intrinsics { fx, fy, cx, cy, .. } = self.intrinsics;
-        let ray_x: Vec<f32> = (0..width).map(|u| (u as f32 - cx) / fx).collect();
-        for v in 0..height as usize {
-            let ray_y = (v as f32 - cy) / fy;
+        // The rays' x per column and y per row, computed once each (without two divisions
+        // and a division of the index per pixel).
+        let ray_x = self.intrinsics.column_rays();
+        for (v, ray_y) in self.intrinsics.row_rays().into_iter().enumerate() {
             for (u, &ray_x) in ray_x.iter().enumerate() {
                 let z = self
                     .depth_m
@@ -184,6 +197,25 @@ mod tests {
         assert_eq!(d.invalid_pixels, 3);
         // Pixel (0, 1) at 2 m: x = (0 - 0.5) / 2 * 2, y = (1 - 0.5) / 2 * 2, then +1 m in z.
         assert_eq!(d.points_in_world, vec![Vec3::new(-0.5, 0.5, 3.0)]);
+    }
+
+    #[test]
+    fn column_and_row_rays_are_the_rays_through_the_pixels() {
+        let k = Intrinsics {
+            width: 5,
+            height: 3,
+            fx: 2.5,
+            fy: -3.0,
+            cx: 1.7,
+            cy: 0.4,
+        };
+        let (xs, ys) = (k.column_rays(), k.row_rays());
+        assert_eq!((xs.len(), ys.len()), (5, 3));
+        for (v, &y) in ys.iter().enumerate() {
+            for (u, &x) in xs.iter().enumerate() {
+                assert_eq!(Vec3::new(x, y, 1.0), k.ray(u as f32, v as f32));
+            }
+        }
     }
 
     #[test]
