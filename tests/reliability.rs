@@ -328,8 +328,9 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
     assert!(status.success(), "{status}");
 
     let log = daemon.log();
+    let half_frames_noticed = log.matches("in the middle of a frame").count();
     assert!(
-        log.contains("in the middle of a frame"),
+        half_frames_noticed > 0,
         "half-written frames were not noticed:\n{log}"
     );
     let dropped = daemon.logged_counter("(dropped ");
@@ -351,7 +352,8 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
     eprintln!(
         "malicious clients: RSS {} -> {} MiB; {} updates to the good subscriber during the \
          {attack_took:.1?} attack, largest gap {gap:?}; 2,000 cycles in {cycles_took:.1?}; \
-         {dropped} clients dropped, {connected} still connected at exit",
+         {dropped} clients dropped, {connected} still connected at exit; \
+         {half_frames_noticed} of 30 half frames noticed",
         rss_before_kib / 1024,
         rss_after_kib / 1024,
         times.len()

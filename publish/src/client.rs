@@ -644,6 +644,20 @@ fn send_batch(
     Ok(())
 }
 
+/// Why a subscriber's connection ended under its reader: `buffered` bytes of a frame it had
+/// begun, and the read error if it was not a plain end of input. A subscriber that hangs up
+/// with data it never read is seen as a reset, not an end of input, and a frame it left half
+/// sent is named either way.
+pub(crate) fn gone_while_reading(buffered: usize, error: Option<&std::io::Error>) -> Retire {
+    let half_frame = format!("in the middle of a frame ({buffered} bytes unparsed)");
+    Retire::Gone(match (buffered, error) {
+        (0, None) => "disconnected".to_owned(),
+        (0, Some(error)) => format!("read failed: {error}"),
+        (_, None) => format!("disconnected {half_frame}"),
+        (_, Some(error)) => format!("read failed {half_frame}: {error}"),
+    })
+}
+
 /// Reads what the subscriber sends until it disconnects or misbehaves; returns how it ended, or
 /// `None` when the subscriber only stopped sending (the end of its input at a frame boundary)
 /// or was told to go.
@@ -654,10 +668,7 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
         let read = match (&client.stream).read(&mut buffer) {
             Ok(0) if client.is_closed() => return Some(Retire::Quiet),
             Ok(0) if decoder.buffered_len() > 0 => {
-                return Some(Retire::Gone(format!(
-                    "disconnected in the middle of a frame ({} bytes unparsed)",
-                    decoder.buffered_len()
-                )))
+                return Some(gone_while_reading(decoder.buffered_len(), None))
             }
             // The subscriber sends nothing more: it may have closed only its sending side
             // and still read (the server needs nothing from it). The writer finds out which
@@ -666,7 +677,7 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
             Ok(read) => read,
             Err(error) if error.kind() == ErrorKind::Interrupted => continue,
             Err(_) if client.is_closed() => return Some(Retire::Quiet),
-            Err(error) => return Some(Retire::Gone(format!("read failed: {error}"))),
+            Err(error) => return Some(gone_while_reading(decoder.buffered_len(), Some(&error))),
         };
         decoder.push(&buffer[..read]);
         loop {

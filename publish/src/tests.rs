@@ -1138,3 +1138,35 @@ fn bodies_reach_only_the_clients_that_ask_for_them() {
     assert_eq!(client.expect(), Message::Pose(pose(1, 1, 2000)));
     assert_eq!(client.expect(), Message::SnapshotDone);
 }
+
+/// A subscriber that hangs up with data it never read is a reset on the server's side, not an
+/// end of input, after the bytes it did send; a frame it left half sent is named either way.
+#[test]
+fn a_half_frame_is_named_whether_the_hang_up_is_an_end_or_a_reset() {
+    let (mut server, mut subscriber) = UnixStream::pair().unwrap();
+    server.write_all(&[1, 0, 0, 0, 0x04]).unwrap(); // a frame the subscriber never reads
+    subscriber.write_all(&[5, 0, 0]).unwrap();
+    drop(subscriber);
+    let mut buffer = [0u8; 16];
+    assert_eq!(server.read(&mut buffer).unwrap(), 3, "the half frame first");
+    let reset = server.read(&mut buffer).unwrap_err();
+    assert_eq!(reset.kind(), ErrorKind::ConnectionReset);
+
+    let reason = |retire: crate::client::Retire| match retire {
+        crate::client::Retire::Gone(reason) => reason,
+        _ => panic!("a hang-up is not a drop"),
+    };
+    let after_reset = reason(crate::client::gone_while_reading(3, Some(&reset)));
+    assert!(
+        after_reset.contains("in the middle of a frame (3 bytes unparsed)")
+            && after_reset.contains("reset"),
+        "{after_reset}"
+    );
+    let after_end = reason(crate::client::gone_while_reading(3, None));
+    assert_eq!(
+        after_end,
+        "disconnected in the middle of a frame (3 bytes unparsed)"
+    );
+    let between_frames = reason(crate::client::gone_while_reading(0, Some(&reset)));
+    assert!(!between_frames.contains("frame"), "{between_frames}");
+}
