@@ -284,14 +284,19 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
         assert_cut_off(send_raw(&socket, bytes), what, Duration::from_secs(10));
     }
 
-    // Half-written frames, then hang-up. Each client first reads its Hello, so that the
-    // daemon's writer has sent what it had: a hang-up before the Hello is written is seen by
-    // the writer ("write failed") as often as by the reader, and then says nothing about how
-    // the half frame was handled.
+    // Half-written frames, then hang-up. Each client first reads its snapshot, so that the
+    // daemon's writer has sent what it had: a hang-up in the middle of the snapshot is seen
+    // by the writer (a broken pipe) as often as by the reader, and then says nothing about how
+    // the half frame was handled. (Updates that come after it and are not read make the
+    // hang-up a reset for the reader, which still names the half frame.)
     let halves: [&[u8]; 3] = [&[5, 0, 0], &[1, 0, 0, 0], &[9, 0, 0, 0, 0x80, 1, 2]];
     for k in 0..30 {
-        let subscription =
+        let mut subscription =
             Subscription::connect(&socket, Some(Duration::from_secs(10))).expect("subscribes");
+        while !matches!(
+            subscription.next_message().expect("the snapshot arrives"),
+            Message::SnapshotDone
+        ) {}
         let mut stream = subscription.stream();
         stream
             .write_all(halves[k % halves.len()])
