@@ -174,10 +174,55 @@ impl MomentGrid {
     }
 }
 
-/// Sorts `items` by their voxel's (z, y, x). Voxel indices of any scene this daemon meets fit
-/// in 21 bits each (a kilometre in millimetre voxels), and one packed 64-bit key sorts about
-/// twice as fast as comparing three; larger ones fall back to comparing them.
-fn sort_zyx<T>(items: &mut [T], cell: impl Fn(&T) -> IVec3) {
+/// Sorts `items` by their voxel's (z, y, x), keeping the order of items in the same voxel.
+///
+/// An object's voxels fill a compact box (see `CellIndex`), and a counting sort over the box
+/// orders them in two passes over the items and one over the box: a 1 m cube's 22,700 voxels
+/// at 20 mm noise took 0.9-1.2 ms by comparison, of a 7 ms normals stage that sorts them twice.
+/// Written here rather than taken from a radix-sort crate because the key is a box position
+/// the caller's voxels already give. Voxels spread far apart (a scene with distant outliers)
+/// are sorted by comparison: one packed 64-bit key when each index fits in 21 bits (a
+/// kilometre in millimetre voxels), about twice as fast as comparing three, else three.
+fn sort_zyx<T: Copy>(items: &mut [T], cell: impl Fn(&T) -> IVec3) {
+    /// The counting sort's box may have at most this many cells per item (4 bytes each)...
+    const MAX_BOX_CELLS_PER_ITEM: i64 = 32;
+    /// ...or this many for short lists, and never more than the last (64 MiB).
+    const MIN_BOX_CELLS: i64 = 1 << 12;
+    const MAX_BOX_CELLS: i64 = 1 << 24;
+    let Some(first) = items.first().map(&cell) else {
+        return;
+    };
+    let (lo, hi) = items.iter().fold((first, first), |(lo, hi), item| {
+        let c = cell(item);
+        (lo.min(c), hi.max(c))
+    });
+    let (lo, dims) = (lo.as_i64vec3(), hi.as_i64vec3() - lo.as_i64vec3() + 1);
+    let box_cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
+    let box_limit = MAX_BOX_CELLS_PER_ITEM
+        .saturating_mul(items.len() as i64)
+        .clamp(MIN_BOX_CELLS, MAX_BOX_CELLS);
+    if box_cells <= box_limit {
+        let slot = |item: &T| {
+            let d = cell(item).as_i64vec3() - lo;
+            (d.x + dims.x * (d.y + dims.y * d.z)) as usize
+        };
+        // starts[s + 1] counts the items in box cell s, then starts[s] is where its first goes.
+        let mut starts = vec![0u32; box_cells as usize + 1];
+        for item in items.iter() {
+            starts[slot(item) + 1] += 1;
+        }
+        for s in 1..starts.len() {
+            starts[s] += starts[s - 1];
+        }
+        let mut sorted = vec![items[0]; items.len()];
+        for item in items.iter() {
+            let next = &mut starts[slot(item)];
+            sorted[*next as usize] = *item;
+            *next += 1;
+        }
+        items.copy_from_slice(&sorted);
+        return;
+    }
     const BIAS: i32 = 1 << 20;
     let fits = |c: IVec3| c.cmpge(IVec3::splat(-BIAS)).all() && c.cmplt(IVec3::splat(BIAS)).all();
     if items.iter().all(|item| fits(cell(item))) {
@@ -185,9 +230,9 @@ fn sort_zyx<T>(items: &mut [T], cell: impl Fn(&T) -> IVec3) {
             let biased = (c + IVec3::splat(BIAS)).as_uvec3();
             (u64::from(biased.z) << 42) | (u64::from(biased.y) << 21) | u64::from(biased.x)
         };
-        items.sort_unstable_by_key(|item| packed(cell(item)));
+        items.sort_by_key(|item| packed(cell(item)));
     } else {
-        items.sort_unstable_by_key(|item| {
+        items.sort_by_key(|item| {
             let c = cell(item);
             (c.z, c.y, c.x)
         });
@@ -252,6 +297,9 @@ mod tests {
         assert!(grid.add_point_capped(Vec3::NAN, 4.0).is_none());
     }
 
+    /// Compact lists (counting sort), lists spread past the box limit (packed keys) and past
+    /// 21 bits (three keys) all come out in (z, y, x) order, items of one voxel in the order
+    /// they came.
     #[test]
     fn voxels_sort_by_z_then_y_then_x_near_and_far() {
         let near = [
@@ -260,13 +308,31 @@ mod tests {
             IVec3::new(0, 0, -1),
             IVec3::new(-2, -1, 0),
         ];
+        // 3,000 voxels in a 30-voxel box around the origin, many of them twice.
+        let mut state = 0x2545_f491_u32;
+        let mut next = |range: i32| {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            (state % range as u32) as i32 - range / 2
+        };
+        let compact: Vec<IVec3> = (0..3000)
+            .map(|_| IVec3::new(next(30), next(30), next(30)))
+            .collect();
+        let spread = near.map(|c| c * 5000);
         let far = near.map(|c| c + IVec3::new(0, 0, 1 << 22));
-        for cells in [near.to_vec(), [near.as_slice(), &far].concat()] {
-            let mut sorted = cells.clone();
-            sort_zyx(&mut sorted, |&c| c);
-            let mut expected = cells;
-            expected.sort_by_key(|c| (c.z, c.y, c.x));
-            assert_eq!(sorted, expected);
+        for cells in [
+            near.to_vec(),
+            compact,
+            [near.as_slice(), &spread].concat(),
+            [near.as_slice(), &far].concat(),
+        ] {
+            // Each item is its voxel and where it came in the list.
+            let mut items: Vec<(IVec3, usize)> = cells.iter().copied().zip(0..).collect();
+            sort_zyx(&mut items, |&(c, _)| c);
+            let mut expected: Vec<(IVec3, usize)> = cells.iter().copied().zip(0..).collect();
+            expected.sort_by_key(|&(c, i)| (c.z, c.y, c.x, i));
+            assert_eq!(items, expected);
         }
     }
 
