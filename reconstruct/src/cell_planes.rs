@@ -79,7 +79,7 @@ impl<'a> TwoScaleGrid<'a> {
 
     /// The index in `coarse_planes` of the plane of the coarse voxel holding fine voxel `cell`.
     fn parent_plane_index(&self, cell: IVec3) -> Option<usize> {
-        let slot = self.coarse_index.get(cell.div_euclid(IVec3::splat(2)))?;
+        let slot = self.coarse_index.get(cell >> 1)?;
         match self.plane_of_coarse[slot as usize] {
             NO_PLANE => None,
             plane => Some(plane as usize),
@@ -94,7 +94,7 @@ impl<'a> TwoScaleGrid<'a> {
     /// Moments of the 4×4×4 fine voxels centred on `cell`: the 2×2×2 coarse voxels on the side
     /// of `cell`'s own coarse voxel that it is nearest to.
     fn box_around(&self, cell: IVec3) -> PointMoments {
-        let parent = cell.div_euclid(IVec3::splat(2));
+        let parent = cell >> 1; // floor(cell / 2), without a division
         let odd = cell - parent * 2; // 0 or 1 per axis
         let first = parent + odd - IVec3::ONE;
         let mut sum = PointMoments::default();

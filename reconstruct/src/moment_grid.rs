@@ -138,11 +138,17 @@ impl MomentGrid {
         coarse
             .cells
             .reserve(voxels.len() / (factor * factor) as usize);
+        // A shift for a power of two: `div_euclid` by a value not known at compile time is
+        // three integer divisions a voxel.
+        let parent = |cell: IVec3| {
+            if factor.count_ones() == 1 {
+                cell >> factor.trailing_zeros() as i32
+            } else {
+                cell.div_euclid(IVec3::splat(factor))
+            }
+        };
         for (cell, m) in voxels {
-            *coarse
-                .cells
-                .entry(cell.div_euclid(IVec3::splat(factor)))
-                .or_default() += m;
+            *coarse.cells.entry(parent(cell)).or_default() += m;
         }
         coarse
     }
@@ -343,6 +349,16 @@ mod tests {
         let coarse = grid.coarsened(2);
         assert_eq!(coarse.get(IVec3::ZERO).map(|m| m.count), Some(2.0));
         assert_eq!(coarse.get(IVec3::splat(-1)).map(|m| m.count), Some(1.0));
+        // A factor that is not a power of two: voxels -3..=2 of 0.1 m by threes.
+        let mut grid = MomentGrid::new(0.1);
+        let points: Vec<Vec3> = (-3..=2)
+            .map(|i| Vec3::new(i as f32 * 0.1 + 0.05, 0.05, 0.05))
+            .collect();
+        grid.integrate(&points);
+        let coarse = grid.coarsened(3);
+        assert_eq!(coarse.len(), 2);
+        assert_eq!(coarse.get(IVec3::new(-1, 0, 0)).map(|m| m.count), Some(3.0));
+        assert_eq!(coarse.get(IVec3::ZERO).map(|m| m.count), Some(3.0));
     }
 
     #[test]

@@ -60,7 +60,8 @@ fn planes_by_window(planes: &[CellPlane], band: i32, step: i32) -> Vec<(IVec3, V
     windows
 }
 
-/// A plane as the corner loop reads it.
+/// A plane as the corner loop reads it, made once per plane rather than once per window it
+/// lands in (up to eight): the corner range takes six integer divisions by the step.
 #[derive(Clone, Copy)]
 struct WindowPlane {
     point: Vec3,
@@ -68,10 +69,16 @@ struct WindowPlane {
     /// `normal · point`, so the signed distance is `normal · x − offset_m`.
     offset_m: f32,
     weight: f32,
+    /// The corners it reaches, as grid corner indices: those whose voxel index
+    /// `c = corner · step` has the plane's cell in `[c − band, c + band)`, that is `c` in
+    /// `[cell − band + 1, cell + band]`.
+    lowest_corner: IVec3,
+    highest_corner: IVec3,
 }
 
 impl WindowPlane {
-    fn new(plane: &CellPlane) -> Self {
+    fn new(plane: &CellPlane, band: i32, step: i32) -> Self {
+        let cell = plane.cell;
         Self {
             point: plane.point,
             normal: plane.normal,
@@ -80,6 +87,8 @@ impl WindowPlane {
             // one centred in the noise fringe beside it, and its plane should outvote the
             // fringe's.
             weight: plane.points * plane.points,
+            lowest_corner: -(-(cell - IVec3::splat(band - 1))).div_euclid(IVec3::splat(step)),
+            highest_corner: (cell + IVec3::splat(band)).div_euclid(IVec3::splat(step)),
         }
     }
 }
@@ -98,12 +107,11 @@ impl WindowPlane {
 /// did and the values are the same to the bit.
 fn evaluate_block(
     key: IVec3,
-    planes: &[CellPlane],
+    planes: &[WindowPlane],
     in_window: &[u32],
     config: &SignedDistanceConfig,
     origin: Vec3,
 ) -> Option<SdfBlock> {
-    let band = config.band_voxels;
     let step = config.corner_step;
     let voxel = config.voxel_size_m;
     let width_sq = (config.kernel_width_voxels * voxel).powi(2);
@@ -113,17 +121,13 @@ fn evaluate_block(
     let mut sums = [0.0f32; BLOCK_VOXELS];
     let mut weights = [0.0f32; BLOCK_VOXELS];
     for &i in in_window {
-        let plane = WindowPlane::new(&planes[i as usize]);
+        let plane = &planes[i as usize];
         if plane.weight == 0.0 {
             continue;
         }
-        let cell = planes[i as usize].cell;
-        // Corners whose voxel index c = corner · step has cell in [c − band, c + band), that is
-        // c in [cell − band + 1, cell + band]; as corner indices local to the block, clipped.
-        let lowest = -(-(cell - IVec3::splat(band - 1))).div_euclid(IVec3::splat(step));
-        let highest = (cell + IVec3::splat(band)).div_euclid(IVec3::splat(step));
-        let lo = (lowest - first_corner).max(IVec3::ZERO);
-        let hi = (highest - first_corner).min(last_local);
+        // The corners it reaches, local to the block, clipped.
+        let lo = (plane.lowest_corner - first_corner).max(IVec3::ZERO);
+        let hi = (plane.highest_corner - first_corner).min(last_local);
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
@@ -165,12 +169,16 @@ pub fn signed_distance_near(planes: &[CellPlane], config: &SignedDistanceConfig)
     let step = config.corner_step;
     let mut sdf = SparseSdf::new(config.voxel_size_m * step as f32, origin);
     let windows = planes_by_window(planes, config.band_voxels.max(1), step);
+    let window_planes: Vec<WindowPlane> = planes
+        .par_iter()
+        .map(|plane| WindowPlane::new(plane, config.band_voxels, step))
+        .collect();
     let blocks: Vec<(IVec3, SdfBlock)> = windows
         .par_iter()
         .filter_map(|(key, in_window)| {
             Some((
                 *key,
-                evaluate_block(*key, planes, in_window, &config, origin)?,
+                evaluate_block(*key, &window_planes, in_window, &config, origin)?,
             ))
         })
         .collect();
