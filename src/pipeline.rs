@@ -15,8 +15,8 @@ use tacmesh_reconstruct::surface::{
     mesh_moment_grid, reconstruct_surface, Orientation, ReconstructConfig, Reconstruction,
 };
 use tacmesh_simplify::{
-    fit_to_samples, rms_distance_m, simplify, simplify_near_held_points, FitConfig, HeldPoints,
-    SimplifyConfig, WeightedSample,
+    fit_to_samples, rms_distance_m, simplify, simplify_near_held_points, FitConfig, FitSamples,
+    HeldPoints, SimplifyConfig, WeightedSample,
 };
 use tacmesh_source::{glam::Vec3, PointCloud, TriMesh};
 
@@ -667,15 +667,15 @@ fn simplify_and_fit(
                 })
             })
             .collect();
+        let data = FitSamples::new(&samples, 2.5 * max_residual_m);
         let fit_config = FitConfig {
             iterations: 3,
             max_move_m: max_residual_m,
-            reject_m: 2.5 * max_residual_m,
             stiffness: 1e-3,
             // Measured once, on the final mesh, below.
             measure_after: false,
         };
-        let mut fit = fit_to_samples(&mut mesh, &samples, &fit_config);
+        let mut fit = fit_to_samples(&mut mesh, &data, &fit_config);
         // The fit put back the corners and edges that marching cubes had rounded, so chamfer
         // vertices the first pass had to keep now lie on the sharp planes: a pass over the
         // small fitted mesh, held to the same marching-cubes vertices under the same bound,
@@ -696,7 +696,7 @@ fn simplify_and_fit(
             mesh = merged;
             let refit = fit_to_samples(
                 &mut mesh,
-                &samples,
+                &data,
                 &FitConfig {
                     iterations: REFIT_ITERATIONS,
                     ..fit_config
@@ -710,7 +710,7 @@ fn simplify_and_fit(
             }
         }
         simplify_ms += refine_ms;
-        fit.rms_after_m = rms_distance_m(&mesh, &samples, fit_config.reject_m);
+        fit.rms_after_m = rms_distance_m(&mesh, &data);
         fit
     } else {
         Default::default()

@@ -19,7 +19,9 @@
 use arbitrary::{Arbitrary, Unstructured};
 use glam::Vec3;
 use libfuzzer_sys::fuzz_target;
-use tacmesh_simplify::{fit_to_samples, simplify, FitConfig, SimplifyConfig, WeightedSample};
+use tacmesh_simplify::{
+    fit_to_samples, simplify, FitConfig, FitSamples, SimplifyConfig, WeightedSample,
+};
 use tacmesh_source::TriMesh;
 
 /// Bounds that keep one input to milliseconds; meshes this size already hold every local case.
@@ -52,12 +54,12 @@ fuzz_target!(|data: &[u8]| {
         let fit = FitConfig {
             iterations: 3,
             max_move_m: config.max_residual_m,
-            reject_m: 2.5 * config.max_residual_m,
             stiffness: 1e-3,
             measure_after: true,
         };
         let triangles = out.triangles.clone();
-        fit_to_samples(&mut out, &samples, &fit);
+        let data = FitSamples::new(&samples, 2.5 * config.max_residual_m);
+        fit_to_samples(&mut out, &data, &fit);
         assert_eq!(out.triangles, triangles, "the fit changed connectivity");
         assert!(out.vertices.iter().all(|v| v.is_finite()));
     }

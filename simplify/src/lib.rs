@@ -67,7 +67,9 @@ mod quadric;
 mod triangle_grid;
 
 pub use edge_collapse::{simplify, simplify_near_held_points, simplify_near_points, HeldPoints};
-pub use fit_to_samples::{fit_to_samples, rms_distance_m, FitConfig, FitReport, WeightedSample};
+pub use fit_to_samples::{
+    fit_to_samples, rms_distance_m, FitConfig, FitReport, FitSamples, WeightedSample,
+};
 
 use glam::Vec3;
 
