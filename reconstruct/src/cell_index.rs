@@ -1,4 +1,6 @@
-//! Where each voxel of a fixed list is: cell → its position in the list.
+//! Where each voxel of a fixed list is: cell → its position in the list; and [`CellBox`], the
+//! box a compact list of voxels spans, for dense arrays over it (this index, and the counting
+//! sort of `moment_grid`).
 //!
 //! The plane fits read 27, 8 and 1 neighbouring voxels per voxel, and with a hash map those
 //! look-ups were most of their time. An object's voxels fill a compact box (a 1 m object's
@@ -12,12 +14,61 @@ use rustc_hash::FxHashMap;
 
 const NONE: u32 = u32::MAX;
 
-/// The dense array may hold at most this many entries per listed voxel (4 bytes each)...
+/// The index's dense array may hold at most this many entries per listed voxel (4 bytes each).
 const MAX_BOX_CELLS_PER_CELL: i64 = 64;
-/// ...or this many, for short lists...
+/// A dense array over a [`CellBox`] may have this many cells whatever the list's length...
 const MIN_DENSE_CELLS: i64 = 1 << 12;
-/// ...and never more than this (64 MiB).
+/// ...and never more than this (64 MiB of 4-byte entries).
 const MAX_DENSE_CELLS: i64 = 1 << 24;
+
+/// The box of voxels a list spans, addressed as a dense array in (z, y, x) order.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CellBox {
+    min: I64Vec3,
+    dims: I64Vec3,
+}
+
+impl CellBox {
+    /// The box around `cells` (`count` of them) when a dense array over it has at most
+    /// `max_cells_per_cell` entries per listed cell (or [`MIN_DENSE_CELLS`] for short lists,
+    /// never more than [`MAX_DENSE_CELLS`]); `None` for a list spread farther, or empty.
+    pub(crate) fn compact_around(
+        mut cells: impl Iterator<Item = IVec3>,
+        count: usize,
+        max_cells_per_cell: i64,
+    ) -> Option<Self> {
+        let first = cells.next()?;
+        let (lo, hi) = cells.fold((first, first), |(lo, hi), c| (lo.min(c), hi.max(c)));
+        let (min, dims) = (lo.as_i64vec3(), hi.as_i64vec3() - lo.as_i64vec3() + 1);
+        let box_cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
+        let limit = max_cells_per_cell
+            .saturating_mul(count as i64)
+            .clamp(MIN_DENSE_CELLS, MAX_DENSE_CELLS);
+        (box_cells <= limit).then_some(Self { min, dims })
+    }
+
+    /// Cells in the box.
+    pub(crate) fn len(&self) -> usize {
+        (self.dims.x * self.dims.y * self.dims.z) as usize
+    }
+
+    /// The array position of `cell`, which must lie in the box.
+    #[inline]
+    pub(crate) fn slot_inside(&self, cell: IVec3) -> usize {
+        let d = cell.as_i64vec3() - self.min;
+        (d.x + self.dims.x * (d.y + self.dims.y * d.z)) as usize
+    }
+
+    /// The array position of `cell`, if it lies in the box.
+    #[inline]
+    pub(crate) fn slot(&self, cell: IVec3) -> Option<usize> {
+        let d = cell.as_i64vec3() - self.min;
+        if d.cmplt(I64Vec3::ZERO).any() || d.cmpge(self.dims).any() {
+            return None;
+        }
+        Some((d.x + self.dims.x * (d.y + self.dims.y * d.z)) as usize)
+    }
+}
 
 /// Cell → index into the list the index was made from.
 #[derive(Debug, Clone)]
@@ -27,10 +78,9 @@ pub struct CellIndex {
 
 #[derive(Debug, Clone)]
 enum Lookup {
-    /// `slots[x + dims.x · (y + dims.y · z)]` for the cell `min + (x, y, z)`.
+    /// `slots[cells.slot(cell)]` for each cell in the box.
     Dense {
-        min: I64Vec3,
-        dims: I64Vec3,
+        cells: CellBox,
         slots: Vec<u32>,
     },
     Sparse(FxHashMap<IVec3, u32>),
@@ -39,25 +89,17 @@ enum Lookup {
 impl CellIndex {
     /// Indexes `cells` (distinct; a repeated cell finds its last position).
     pub fn new(cells: &[IVec3]) -> Self {
-        let Some(&first) = cells.first() else {
-            return Self {
-                lookup: Lookup::Sparse(FxHashMap::default()),
-            };
-        };
-        let (lo, hi) = cells
-            .iter()
-            .fold((first, first), |(lo, hi), &c| (lo.min(c), hi.max(c)));
-        let (min, dims) = (lo.as_i64vec3(), hi.as_i64vec3() - lo.as_i64vec3() + 1);
-        let box_cells = dims.x.saturating_mul(dims.y).saturating_mul(dims.z);
-        let dense_limit = (MAX_BOX_CELLS_PER_CELL.saturating_mul(cells.len() as i64))
-            .clamp(MIN_DENSE_CELLS, MAX_DENSE_CELLS);
-        let lookup = if box_cells <= dense_limit {
-            let mut slots = vec![NONE; box_cells as usize];
+        let compact =
+            CellBox::compact_around(cells.iter().copied(), cells.len(), MAX_BOX_CELLS_PER_CELL);
+        let lookup = if let Some(cell_box) = compact {
+            let mut slots = vec![NONE; cell_box.len()];
             for (i, &cell) in cells.iter().enumerate() {
-                let d = cell.as_i64vec3() - min;
-                slots[(d.x + dims.x * (d.y + dims.y * d.z)) as usize] = i as u32;
+                slots[cell_box.slot_inside(cell)] = i as u32;
             }
-            Lookup::Dense { min, dims, slots }
+            Lookup::Dense {
+                cells: cell_box,
+                slots,
+            }
         } else {
             Lookup::Sparse(
                 cells
@@ -74,12 +116,8 @@ impl CellIndex {
     #[inline]
     pub fn get(&self, cell: IVec3) -> Option<u32> {
         match &self.lookup {
-            Lookup::Dense { min, dims, slots } => {
-                let d = cell.as_i64vec3() - *min;
-                if d.cmplt(I64Vec3::ZERO).any() || d.cmpge(*dims).any() {
-                    return None;
-                }
-                let slot = slots[(d.x + dims.x * (d.y + dims.y * d.z)) as usize];
+            Lookup::Dense { cells, slots } => {
+                let slot = slots[cells.slot(cell)?];
                 (slot != NONE).then_some(slot)
             }
             Lookup::Sparse(map) => map.get(&cell).copied(),
