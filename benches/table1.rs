@@ -476,8 +476,8 @@ fn main() {
     }
 
     println!("\n### Simplifier against meshoptimizer on the same marching-cubes mesh ({speed_noise} mm, seed 1, same face count, no fit)\n");
-    println!("| shape | faces | ours ms | meshopt ms | time ratio ours/meshopt | ours MHE (m) | meshopt MHE (m) | MHE ratio ours/meshopt | ours + fit MHE (m) |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("| shape | faces | ours ms | meshopt ms | time ratio ours/meshopt | ours MHE (m) | meshopt MHE (m) | MHE ratio ours/meshopt | ours + fit MHE (m) | our collapses: queue pops / evaluations / support points checked / searched, per collapse |");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (shape, ..) in PAPER_TABLE1 {
         let cloud = cloud_for(shape, speed_noise, 1, options.points);
         let config = MeshConfig::default();
@@ -490,8 +490,9 @@ fn main() {
         let reps = 5;
         let start = Instant::now();
         let mut ours = TriMesh::default();
+        let mut ours_report = Default::default();
         for _ in 0..reps {
-            ours = simplify(&dense, &simplify_config).expect("simplifies").0;
+            (ours, ours_report) = simplify(&dense, &simplify_config).expect("simplifies");
         }
         let ours_ms = start.elapsed().as_secs_f64() * 1e3 / reps as f64;
         let start = Instant::now();
@@ -510,13 +511,20 @@ fn main() {
         let fitted_mhe = mesh_distance(&truth, &fitted, PAPER_SAMPLES, 1)
             .expect("compare")
             .mhe_m;
+        let work = ours_report.work;
+        let per_collapse = |n: usize| n as f64 / ours_report.collapses.max(1) as f64;
         println!(
-            "| {} | {} vs {} | {ours_ms:.1} | {theirs_ms:.1} | {:.2} | {ours_mhe:.5} | {theirs_mhe:.5} | {:.2} | {fitted_mhe:.5} |",
+            "| {} | {} vs {} | {ours_ms:.1} | {theirs_ms:.1} | {:.2} | {ours_mhe:.5} | {theirs_mhe:.5} | {:.2} | {fitted_mhe:.5} | {}: {:.1} / {:.2} / {:.1} / {:.1} |",
             shape.name(),
             ours.triangles.len(),
             theirs.triangles.len(),
             ours_ms / theirs_ms,
-            ours_mhe / theirs_mhe
+            ours_mhe / theirs_mhe,
+            ours_report.collapses,
+            per_collapse(work.queue_pops),
+            per_collapse(work.evaluations),
+            per_collapse(work.support_checks),
+            per_collapse(work.support_searches),
         );
     }
 

@@ -935,7 +935,7 @@ impl<'m> Simplifier<'m> {
     /// The `new_face` slot nearest to support point `p` and the weights of the closest point on
     /// it, or `None` when no face around `v*` is within the threshold. A point settled on its own
     /// surviving face stays there.
-    fn nearest_new_face(&self, p: u32) -> Option<(u32, [f32; 2])> {
+    fn nearest_new_face(&mut self, p: u32) -> Option<(u32, [f32; 2])> {
         let sc = &self.scratch;
         let support = &self.support[p as usize];
         let x = support.position;
@@ -945,7 +945,8 @@ impl<'m> Simplifier<'m> {
         } else {
             (NONE, (f32::INFINITY, [0.0; 2]))
         };
-        if own == NONE || best > self.settled_sq {
+        let search = own == NONE || best > self.settled_sq;
+        if search {
             for (slot, tri) in sc.new_tri.iter().enumerate() {
                 let h = tri.plane_distance(x);
                 if h * h >= best || slot as u32 == own {
@@ -957,6 +958,7 @@ impl<'m> Simplifier<'m> {
                 }
             }
         }
+        self.report.work.support_searches += usize::from(search);
         (best_slot != NONE && best <= self.threshold_sq).then_some((best_slot, best_weights))
     }
 
@@ -989,6 +991,7 @@ impl<'m> Simplifier<'m> {
         // A point that failed here before goes first: a refusal then costs one point, not all.
         for hint in [self.fail_hint[a as usize], self.fail_hint[b as usize]] {
             if hint != NONE {
+                self.report.work.support_checks += 1;
                 let t = self.tris[self.support[hint as usize].face as usize];
                 if (t.contains(&a) || t.contains(&b)) && self.nearest_new_face(hint).is_none() {
                     return Verdict::Residual;
@@ -1006,6 +1009,7 @@ impl<'m> Simplifier<'m> {
             let own = self.scratch.slot_of_face[f as usize];
             let mut p = self.face_support[f as usize];
             while p != NONE {
+                self.report.work.support_checks += 1;
                 let support = &self.support[p as usize];
                 let (weights, next) = (support.weights, support.next);
                 let tracked = if own != NONE {
@@ -1228,6 +1232,7 @@ impl<'m> Simplifier<'m> {
 
     fn run(&mut self) {
         while let Some(entry) = self.queue.pop() {
+            self.report.work.queue_pops += 1;
             if self.faces_alive <= self.min_faces {
                 break;
             }
@@ -1245,6 +1250,7 @@ impl<'m> Simplifier<'m> {
                     continue;
                 }
             }
+            self.report.work.evaluations += 1;
             let (verdict, a, b) = self.evaluate(a, b, target);
             match verdict {
                 Verdict::Collapse => {

@@ -118,6 +118,25 @@ pub struct SimplifyReport {
     /// Extra points of [`simplify_near_points`] left out because they were already farther
     /// than `max_residual_m` from the input mesh.
     pub points_beyond_bound: usize,
+    /// What the run did to get there, for profiling.
+    pub work: SimplifyWork,
+}
+
+/// Counts of the simplifier's unit steps in one run: where its time goes, independent of the
+/// machine. Counting costs a few additions per collapse.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimplifyWork {
+    /// Entries taken from the edge queue, including those of merged-away vertices and those
+    /// ranked before a collapse moved an end (re-ranked, then queued again or evaluated).
+    pub queue_pops: usize,
+    /// Edges run through the collapse checks (topology, geometry, residual).
+    pub evaluations: usize,
+    /// Support points checked by the residual rule (each point on a face around an evaluated
+    /// edge, until one fails).
+    pub support_checks: usize,
+    /// Of those, the points that needed a search over every face around the new vertex (their
+    /// face was removed, or the surviving face moved away from them).
+    pub support_searches: usize,
 }
 
 /// Why [`simplify`] refused its input.

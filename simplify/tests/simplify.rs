@@ -579,3 +579,26 @@ fn components_are_found_whatever_the_order_of_indices() {
     assert_manifold(&out);
     assert!((out.area() - 1.0).abs() < 1e-4, "area {}", out.area());
 }
+
+#[test]
+fn the_work_counts_add_up() {
+    let mesh = marching_tetrahedra(|p| p.length() - 0.5, Vec3::splat(-0.5713), 0.05, 24);
+    let (_, report) = run(&mesh, 0.012);
+    let work = report.work;
+    let refused =
+        report.rejected_by_residual + report.rejected_by_topology + report.rejected_by_geometry;
+    // Every collapse and every refusal was an evaluation, and every evaluation a pop; a
+    // collapse checks at least the support points of the faces it removes.
+    assert!(work.evaluations >= report.collapses + refused, "{report:?}");
+    assert!(work.queue_pops >= work.evaluations, "{report:?}");
+    assert!(work.support_checks >= report.collapses, "{report:?}");
+    assert!(work.support_searches <= work.support_checks, "{report:?}");
+    assert!(work.support_searches > 0, "{report:?}");
+    // Nothing to collapse, nothing counted but the pops that find it so.
+    let (_, still) = run(&tetrahedron(), f32::INFINITY);
+    assert_eq!(
+        still.work.evaluations, still.rejected_by_topology,
+        "{still:?}"
+    );
+    assert_eq!(still.work.support_checks, 0, "{still:?}");
+}
