@@ -107,12 +107,18 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         );
     }
     tracing::debug!(
-        "object {}: meshed {} points into {} faces (from {}) in {:.1} ms",
+        "object {}: meshed {} points into {} faces (from {}, {} after the first pass) in {:.1} ms \
+         (mesh {:.1}, simplify {:.1} of which refine {:.1}, fit {:.1})",
         job.object_id,
         report.points,
         report.faces,
         report.recon_faces,
-        started.elapsed().as_secs_f64() * 1e3
+        report.first_pass_faces,
+        started.elapsed().as_secs_f64() * 1e3,
+        mesh_ms,
+        report.simplify_ms,
+        report.refine_ms,
+        report.fit_ms
     );
     let stats = SimplifyStats {
         faces_in: report.recon_faces.min(u32::MAX as usize) as u32,
