@@ -166,9 +166,7 @@ struct CentredBox {
 /// crosses the middle cell.
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let mut grid = MomentGrid::new(cell_m);
-    for &p in points {
-        grid.add_point(p);
-    }
+    grid.integrate(points);
     grid.sorted_cells()
         .into_iter()
         .filter_map(|cell| {
