@@ -17,9 +17,11 @@
 //! Entry points: [`estimate_noise_m`], [`estimate_points_per_m2`], and both at once (sharing
 //! their boxes where they can) [`estimate_noise_and_density`].
 
-use glam::Vec3;
+use glam::{IVec3, Vec3};
 
+use crate::cell_index::CellIndex;
 use crate::moment_grid::MomentGrid;
+use crate::moments::PointMoments;
 
 /// At most this many points go into the estimate (an even subsample of the cloud): the median
 /// of a few hundred boxes is as good as that of thousands, and the estimate stays cheap.
@@ -163,14 +165,38 @@ struct CentredBox {
 }
 
 /// The boxes of 3 × 3 × 3 `cell_m` cells, with enough points for a plane, whose points' plane
-/// crosses the middle cell.
+/// crosses the middle cell. As the coarse plane fits do (`cell_planes`), the 27 cells of each
+/// box are read through a [`CellIndex`] over the cells in a list rather than the grid's hash
+/// map. The estimate runs before meshing starts, once or up to four times (2.5 ms a run for
+/// the 1 m cube's 4,860 cells on one core, two thirds of it in the boxes, most of that the
+/// plane fits); fitting the boxes in parallel did not shorten it on two cores.
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let mut grid = MomentGrid::new(cell_m);
     grid.integrate(points);
-    grid.sorted_cells()
-        .into_iter()
-        .filter_map(|cell| {
-            let around = grid.neighbourhood(cell, 1);
+    let cells = grid.sorted_cells();
+    let moments: Vec<PointMoments> = cells
+        .iter()
+        .map(|&cell| grid.get(cell).copied().unwrap_or_default())
+        .collect();
+    let index = CellIndex::new(&cells);
+    // In the order of `MomentGrid::neighbourhood`, so that the sums are the same to the bit.
+    let box_around = |cell: IVec3| {
+        let mut sum = PointMoments::default();
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(slot) = index.get(cell + IVec3::new(dx, dy, dz)) {
+                        sum += &moments[slot as usize];
+                    }
+                }
+            }
+        }
+        sum
+    };
+    cells
+        .iter()
+        .filter_map(|&cell| {
+            let around = box_around(cell);
             if around.count < MIN_POINTS_FOR_A_PLANE {
                 return None;
             }
