@@ -454,14 +454,15 @@ fn main() {
         "\n### Speed at {speed_noise} mm noise: median milliseconds per stage ({} threads) and whole pipeline on one thread\n",
         rayon::current_num_threads()
     );
-    println!("| shape | integrate | normals | orient | signed distance | marching cubes | simplify (of which after the fit) | fit | **total** | total, 1 thread |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("| shape | estimates | integrate | normals | orient | signed distance | marching cubes | simplify (of which after the fit) | fit | **total** | total, 1 thread |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for (shape, ..) in PAPER_TABLE1 {
         let rs = of(shape, speed_noise);
         let m = |f: &dyn Fn(&Run) -> f64| median(rs.iter().map(|r| f(r)).collect());
         println!(
-            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} ({:.1}) | {:.1} | **{:.1}** | {:.1} |",
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} ({:.1}) | {:.1} | **{:.1}** | {:.1} |",
             shape.name(),
+            m(&|r| r.report.estimate_ms),
             m(&|r| r.report.integrate_ms),
             m(&|r| r.report.normals_ms),
             m(&|r| r.report.orient_ms),

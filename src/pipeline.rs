@@ -274,6 +274,9 @@ pub struct MeshReport {
     /// Marching-cubes vertices already farther than the bound from the fitted mesh, which the
     /// last pass could not hold to it (0 with the fit off).
     pub vertices_beyond_bound: usize,
+    /// The cloud's extent, noise and density, estimated to choose the voxel before integration
+    /// (0 for a fused grid, whose voxel is fixed).
+    pub estimate_ms: f64,
     pub integrate_ms: f64,
     pub normals_ms: f64,
     pub orient_ms: f64,
@@ -485,6 +488,7 @@ pub fn mesh_cloud_with_dense(
         }
         _ => base_voxel_m,
     };
+    let estimate_ms = start.elapsed().as_secs_f64() * 1e3;
     let max_residual_m = config.max_residual.resolve_m(extent_m);
     let cell_fits =
         |step: i32, max_of_extent: f32| step as f32 * voxel_size_m <= max_of_extent * extent_m;
@@ -533,6 +537,7 @@ pub fn mesh_cloud_with_dense(
         report.voxel_size_m = voxel_size_m;
         report.noise_m = noise_m;
         report.spacing_m = spacing_m;
+        report.estimate_ms = estimate_ms;
         report.integrate_ms = recon.integrate_ms;
         report.take_meshing_figures(&recon);
         Ok::<_, PipelineError>((dense, mesh, report))
