@@ -20,7 +20,7 @@
 use glam::{IVec3, Vec3};
 
 use crate::cell_index::CellIndex;
-use crate::moment_grid::MomentGrid;
+use crate::moment_grid::sorted_voxel_moments;
 use crate::moments::PointMoments;
 
 /// At most this many points go into the estimate (an even subsample of the cloud): the median
@@ -165,19 +165,13 @@ struct CentredBox {
 }
 
 /// The boxes of 3 × 3 × 3 `cell_m` cells, with enough points for a plane, whose points' plane
-/// crosses the middle cell. As the coarse plane fits do (`cell_planes`), the 27 cells of each
-/// box are read through a [`CellIndex`] over the cells in a list rather than the grid's hash
-/// map. The estimate runs before meshing starts, once or up to four times (2.5 ms a run for
+/// crosses the middle cell. The points are binned by sorting (no hash map), and as the coarse
+/// plane fits do (`cell_planes`) the 27 cells of each box are read through a [`CellIndex`] over
+/// the list of cells. The estimate runs before meshing starts, once or up to four times (2.5 ms a run for
 /// the 1 m cube's 4,860 cells on one core, two thirds of it in the boxes, most of that the
 /// plane fits); fitting the boxes in parallel did not shorten it on two cores.
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
-    let mut grid = MomentGrid::new(cell_m);
-    grid.integrate(points);
-    let cells = grid.sorted_cells();
-    let moments: Vec<PointMoments> = cells
-        .iter()
-        .map(|&cell| grid.get(cell).copied().unwrap_or_default())
-        .collect();
+    let (cells, moments) = sorted_voxel_moments(points, cell_m);
     let index = CellIndex::new(&cells);
     // In the order of `MomentGrid::neighbourhood`, so that the sums are the same to the bit.
     let box_around = |cell: IVec3| {
