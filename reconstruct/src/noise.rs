@@ -166,10 +166,11 @@ struct CentredBox {
 
 /// The boxes of 3 × 3 × 3 `cell_m` cells, with enough points for a plane, whose points' plane
 /// crosses the middle cell. The points are binned by sorting (no hash map), and as the coarse
-/// plane fits do (`cell_planes`) the 27 cells of each box are read through a [`CellIndex`] over
-/// the list of cells. The estimate runs before meshing starts, once or up to four times (2.5 ms a run for
-/// the 1 m cube's 4,860 cells on one core, two thirds of it in the boxes, most of that the
-/// plane fits); fitting the boxes in parallel did not shorten it on two cores.
+/// plane fits do (`cell_planes`) the 27 cells of each box are read through a [`CellIndex`]
+/// over the list of cells. The estimate runs before meshing starts, once or up to four times
+/// (2.5 ms a run for the 1 m cube's 4,860 cells on one core, two thirds of it in the boxes,
+/// most of that the plane fits); fitting the boxes in parallel did not shorten it on two
+/// cores.
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let (cells, moments) = sorted_voxel_moments(points, cell_m);
     let index = CellIndex::new(&cells);
