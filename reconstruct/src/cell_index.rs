@@ -12,6 +12,8 @@
 use glam::{I64Vec3, IVec3};
 use rustc_hash::FxHashMap;
 
+use crate::moments::PointMoments;
+
 const NONE: u32 = u32::MAX;
 
 /// The index's dense array may hold at most this many entries per listed voxel (4 bytes each).
@@ -112,6 +114,23 @@ impl CellIndex {
         Self { lookup }
     }
 
+    /// The sum of `moments` (one per listed cell, in the list's order) over the listed cells
+    /// of the 3 × 3 × 3 box around `cell`, added in (z, y, x) order as
+    /// [`crate::moment_grid::MomentGrid::neighbourhood`] adds them: the same sum to the bit.
+    pub fn moments_around(&self, moments: &[PointMoments], cell: IVec3) -> PointMoments {
+        let mut sum = PointMoments::default();
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(slot) = self.get(cell + IVec3::new(dx, dy, dz)) {
+                        sum += &moments[slot as usize];
+                    }
+                }
+            }
+        }
+        sum
+    }
+
     /// The position of `cell` in the list, if it is there.
     #[inline]
     pub fn get(&self, cell: IVec3) -> Option<u32> {
@@ -128,6 +147,33 @@ impl CellIndex {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn moments_around_a_cell_are_the_grids_neighbourhood_to_the_bit() {
+        use crate::moment_grid::MomentGrid;
+        use glam::Vec3;
+        let points: Vec<Vec3> = (0..2_000)
+            .map(|i| {
+                let t = i as f32 * 0.618_034;
+                Vec3::new(t.sin(), (1.7 * t).cos(), (0.3 * t).sin() * 0.2) * 0.3
+            })
+            .collect();
+        let mut grid = MomentGrid::new(0.04);
+        grid.integrate(&points);
+        let cells = grid.sorted_cells();
+        let moments: Vec<PointMoments> =
+            cells.iter().filter_map(|&c| grid.get(c)).copied().collect();
+        let index = CellIndex::new(&cells);
+        for &cell in &cells {
+            for probe in [cell, cell + IVec3::new(2, 0, -1)] {
+                assert_eq!(
+                    index.moments_around(&moments, probe),
+                    grid.neighbourhood(probe, 1),
+                    "{probe}"
+                );
+            }
+        }
+    }
 
     /// Compact lists go dense and far-flung ones sparse; both find every listed cell and
     /// nothing else, including cells beyond the box on every side and at the ends of `i32`.

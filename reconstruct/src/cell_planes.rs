@@ -122,16 +122,7 @@ fn fit_coarse_planes(
     let fitted: Vec<Option<CellPlane>> = cells
         .par_iter()
         .map(|&cell| {
-            let mut around = PointMoments::default();
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        if let Some(slot) = index.get(cell + IVec3::new(dx, dy, dz)) {
-                            around += &moments[slot as usize];
-                        }
-                    }
-                }
-            }
+            let around = index.moments_around(moments, cell);
             let plane = around.plane()?;
             Some(CellPlane {
                 cell,

@@ -17,11 +17,10 @@
 //! Entry points: [`estimate_noise_m`], [`estimate_points_per_m2`], and both at once (sharing
 //! their boxes where they can) [`estimate_noise_and_density`].
 
-use glam::{IVec3, Vec3};
+use glam::Vec3;
 
 use crate::cell_index::CellIndex;
 use crate::moment_grid::sorted_voxel_moments;
-use crate::moments::PointMoments;
 
 /// At most this many points go into the estimate (an even subsample of the cloud): the median
 /// of a few hundred boxes is as good as that of thousands, and the estimate stays cheap.
@@ -174,24 +173,10 @@ struct CentredBox {
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let (cells, moments) = sorted_voxel_moments(points, cell_m);
     let index = CellIndex::new(&cells);
-    // In the order of `MomentGrid::neighbourhood`, so that the sums are the same to the bit.
-    let box_around = |cell: IVec3| {
-        let mut sum = PointMoments::default();
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    if let Some(slot) = index.get(cell + IVec3::new(dx, dy, dz)) {
-                        sum += &moments[slot as usize];
-                    }
-                }
-            }
-        }
-        sum
-    };
     cells
         .iter()
         .filter_map(|&cell| {
-            let around = box_around(cell);
+            let around = index.moments_around(&moments, cell);
             if around.count < MIN_POINTS_FOR_A_PLANE {
                 return None;
             }
