@@ -52,8 +52,9 @@ pub struct MeshArgs {
     /// are oriented by propagation]
     #[arg(long, value_parser = super::parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
-    /// Print one JSON object with face counts, the residual reached, per-stage milliseconds, the
-    /// points left out for a NaN or infinite coordinate and the viewpoint used
+    /// Print one JSON object with face counts, the residual reached, the fit's distance to the
+    /// data before and after (measuring it after costs one more pass), per-stage milliseconds,
+    /// the points left out for a NaN or infinite coordinate and the viewpoint used
     #[arg(long)]
     json: bool,
     /// Treat CLOUD as a scene: find its support planes and objects with the daemon's
@@ -184,6 +185,8 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
 fn mesh_config(args: &MeshArgs, viewpoint: Option<Vec3>) -> MeshConfig {
     let mut config = MeshConfig {
         viewpoint,
+        // The JSON report carries the fit's distance to the data after (`fit_rms_after`).
+        measure_fit: args.json,
         ..MeshConfig::default()
     };
     if let Some(v) = args.voxel_m {
