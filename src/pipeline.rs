@@ -341,15 +341,25 @@ pub enum PipelineError {
     Simplify(#[from] tacmesh_simplify::SimplifyError),
 }
 
+/// Points [`robust_extent_m`] reads at most: its percentiles are as good from a sample, and
+/// selecting them from every point of a 40,000-point cloud took 0.5 ms, 2 % of meshing it on
+/// one core.
+pub const EXTENT_SAMPLES: usize = 16_384;
+
 /// The object's size for relative lengths: the largest side of the box between the 2nd and
 /// 98th percentile of the points on each axis, so that a few noisy outliers do not inflate it
 /// (with the paper's 20 mm noise the full bounding box of a 1 m cube is ~1.15 m). Non-finite
-/// points are ignored; `None` when there is no finite point.
+/// points are ignored; `None` when there is no finite point. The percentiles come from at most
+/// [`EXTENT_SAMPLES`] of the finite points, taken evenly through the cloud.
 pub fn robust_extent_m(points: &[Vec3]) -> Option<f32> {
-    let finite = || points.iter().filter(|p| p.is_finite());
-    finite().next()?;
+    let finite_count = points.iter().filter(|p| p.is_finite()).count();
+    if finite_count == 0 {
+        return None;
+    }
+    let stride = finite_count.div_ceil(EXTENT_SAMPLES).max(1);
+    let finite = || points.iter().filter(|p| p.is_finite()).step_by(stride);
     let mut extent = 0.0f32;
-    let mut values = Vec::with_capacity(points.len());
+    let mut values = Vec::with_capacity(finite_count.div_ceil(stride));
     for axis in 0..3 {
         values.clear();
         values.extend(finite().map(|p| p[axis]));
@@ -791,6 +801,30 @@ mod tests {
         points.push(Vec3::NAN);
         let extent = robust_extent_m(&points).unwrap();
         assert!((0.9..1.0).contains(&extent), "{extent}");
+    }
+
+    /// A cloud larger than the extent's sample, with every other point missing as a depth
+    /// image's holes can be: the sample is taken over the finite points, so it neither comes
+    /// up empty nor loses the percentiles.
+    #[test]
+    fn robust_extent_of_a_large_cloud_with_holes_is_sampled_over_its_finite_points() {
+        let n = 8 * EXTENT_SAMPLES;
+        let points: Vec<Vec3> = (0..n)
+            .map(|i| {
+                if i % 2 == 0 {
+                    Vec3::NAN
+                } else {
+                    // A 2 m line along x, visited in a scrambled order.
+                    let t = (i * 7919 % n) as f32 / n as f32;
+                    Vec3::new(2.0 * t, 0.1 * t, 0.0)
+                }
+            })
+            .collect();
+        let extent = robust_extent_m(&points).unwrap();
+        // The 2nd to 98th percentile of a uniform 2 m spread is 1.92 m.
+        assert!((extent - 1.92).abs() < 0.01, "{extent}");
+        let all_missing = vec![Vec3::NAN; n];
+        assert_eq!(robust_extent_m(&all_missing), None);
     }
 
     /// Marching cubes rounds the cube's edges; fitting the simplified vertices to the data
