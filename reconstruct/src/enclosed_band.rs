@@ -21,8 +21,6 @@
 //!
 //! Entry point: [`close_where_band_ends`].
 
-use std::collections::VecDeque;
-
 use glam::IVec3;
 
 use crate::sparse_sdf::{local_index, SparseSdf, BLOCK_EDGE};
@@ -87,52 +85,58 @@ pub fn close_where_band_ends(sdf: &mut SparseSdf, erode_layers: i32) -> BandClos
         }
     }
 
-    // Flood the unknown corners reachable from the box's faces (6-connected).
-    let mut queue = VecDeque::new();
+    // Flood the unknown corners reachable from the box's faces (6-connected). The outermost
+    // layer is all unknown: mark it outside, and flood from the unknown corners of the layer
+    // inside it, whose neighbours are all in the box (no bounds to check). Corners are
+    // addressed by index: a step is a fixed offset.
+    let (sx, sxy) = (size.x as usize, size.x as usize * size.y as usize);
+    let steps = [1, sx, sxy];
+    let mut queue: Vec<u32> = Vec::new();
     for z in 0..size.z {
         for y in 0..size.y {
-            for x in [0, size.x - 1] {
-                queue.push_back(IVec3::new(x, y, z));
+            for x in 0..size.x {
+                let p = IVec3::new(x, y, z);
+                // Corners from the box's faces: 0 on the outermost layer.
+                let layer = p.min(size - IVec3::ONE - p).min_element();
+                if layer == 0 {
+                    state[at(p)] = OUTSIDE;
+                } else if layer == 1 && state[at(p)] == UNKNOWN {
+                    state[at(p)] = OUTSIDE;
+                    queue.push(at(p) as u32);
+                }
             }
         }
     }
-    for z in 0..size.z {
-        for x in 0..size.x {
-            for y in [0, size.y - 1] {
-                queue.push_back(IVec3::new(x, y, z));
-            }
-        }
-    }
-    for y in 0..size.y {
-        for x in 0..size.x {
-            for z in [0, size.z - 1] {
-                queue.push_back(IVec3::new(x, y, z));
-            }
-        }
-    }
-    for &p in &queue {
-        state[at(p)] = OUTSIDE;
-    }
-    let steps = [
-        IVec3::X,
-        IVec3::NEG_X,
-        IVec3::Y,
-        IVec3::NEG_Y,
-        IVec3::Z,
-        IVec3::NEG_Z,
-    ];
-    while let Some(p) = queue.pop_front() {
+    while let Some(i) = queue.pop() {
+        let i = i as usize;
         for step in steps {
-            let q = p + step;
-            if q.cmpge(IVec3::ZERO).all() && q.cmplt(size).all() && state[at(q)] == UNKNOWN {
-                state[at(q)] = OUTSIDE;
-                queue.push_back(q);
+            for q in [i - step, i + step] {
+                if state[q] == UNKNOWN {
+                    state[q] = OUTSIDE;
+                    queue.push(q as u32);
+                }
             }
         }
     }
 
-    // The unknown corners next to a known one (26-neighbourhood: every cell marching cubes
-    // could mesh), and the band's outward edge by sign.
+    // Per corner, whether a negative corner and whether any known corner is in its 3 × 3 × 3
+    // neighbourhood (every cell marching cubes could mesh): one bit each, spread one corner
+    // along x, then y, then z, instead of reading 27 neighbours per corner.
+    const NEAR_NEGATIVE: u8 = 1;
+    const NEAR_KNOWN: u8 = 2;
+    let mut near: Vec<u8> = state
+        .iter()
+        .map(|&s| match s {
+            NEGATIVE => NEAR_NEGATIVE | NEAR_KNOWN,
+            POSITIVE => NEAR_KNOWN,
+            _ => 0,
+        })
+        .collect();
+    for step in steps {
+        spread_along(&mut near, step);
+    }
+
+    // The unknown corners next to a known one, and the band's outward edge by sign.
     let mut to_close = Vec::new();
     let mut to_fill = Vec::new();
     let (mut negative_edge, mut edge) = (0usize, 0usize);
@@ -144,17 +148,8 @@ pub fn close_where_band_ends(sdf: &mut SparseSdf, erode_layers: i32) -> BandClos
                 if here == NEGATIVE || here == POSITIVE {
                     continue;
                 }
-                let mut next_to_negative = false;
-                let mut next_to_known = false;
-                for dz in -1..=1 {
-                    for dy in -1..=1 {
-                        for dx in -1..=1 {
-                            let s = state[at(p + IVec3::new(dx, dy, dz))];
-                            next_to_negative |= s == NEGATIVE;
-                            next_to_known |= s == NEGATIVE || s == POSITIVE;
-                        }
-                    }
-                }
+                let next_to_negative = near[at(p)] & NEAR_NEGATIVE != 0;
+                let next_to_known = near[at(p)] & NEAR_KNOWN != 0;
                 if here == OUTSIDE {
                     if next_to_known {
                         edge += 1;
@@ -183,7 +178,14 @@ pub fn close_where_band_ends(sdf: &mut SparseSdf, erode_layers: i32) -> BandClos
     for _ in 0..erode_layers {
         let mut eroded = Vec::new();
         for &ijk in &front {
-            for step in steps {
+            for step in [
+                IVec3::X,
+                IVec3::NEG_X,
+                IVec3::Y,
+                IVec3::NEG_Y,
+                IVec3::Z,
+                IVec3::NEG_Z,
+            ] {
                 let q = ijk - lo + step;
                 if state[at(q)] == NEGATIVE {
                     state[at(q)] = OUTSIDE;
@@ -210,6 +212,37 @@ pub fn close_where_band_ends(sdf: &mut SparseSdf, erode_layers: i32) -> BandClos
     }
 }
 
+/// `values[i] | values[i - step] | values[i + step]` (the values as they were) into every
+/// `values[i]` with both neighbours in the slice, in place, a block at a time: the block's
+/// values as they were, with `step` more on either side, are copied first, so the extra memory
+/// is a block and two steps (at most a few slices of the box), not another box.
+fn spread_along(values: &mut [u8], step: usize) {
+    const BLOCK: usize = 1 << 14;
+    let len = values.len();
+    if step == 0 || len <= 2 * step {
+        return;
+    }
+    let block = BLOCK.max(step);
+    // `was[k]` is the value at `start - step + k` before this pass.
+    let mut was = vec![0u8; block + 2 * step];
+    was[..step].copy_from_slice(&values[..step]);
+    let mut start = step;
+    while start < len - step {
+        let end = (start + block).min(len - step);
+        let n = end - start;
+        was[step..n + 2 * step].copy_from_slice(&values[start..end + step]);
+        let back = &was[..n];
+        let here = &was[step..step + n];
+        let ahead = &was[2 * step..2 * step + n];
+        for (((value, &b), &h), &a) in values[start..end].iter_mut().zip(back).zip(here).zip(ahead)
+        {
+            *value = b | h | a;
+        }
+        was.copy_within(n..n + step, 0);
+        start = end;
+    }
+}
+
 fn set(sdf: &mut SparseSdf, ijk: IVec3, value_m: f32) {
     let (block, local) = SparseSdf::split(ijk);
     sdf.blocks.entry(block).or_default().values_m[local_index(local)] = value_m;
@@ -217,7 +250,7 @@ fn set(sdf: &mut SparseSdf, ijk: IVec3, value_m: f32) {
 
 #[cfg(test)]
 mod tests {
-    use std::collections::HashMap;
+    use std::collections::{HashMap, VecDeque};
 
     use glam::Vec3;
     use tacmesh_source::TriMesh;
@@ -275,6 +308,107 @@ mod tests {
         // The fin is still there: the mesh reaches out along +x past the sphere.
         let reach_m = mesh.vertices.iter().map(|v| v.x).fold(f32::MIN, f32::max);
         assert!(reach_m > 0.18, "{reach_m}");
+    }
+
+    /// The corners to close and to fill counted the plain way: a breadth-first flood from the
+    /// box's faces with every bound checked, and all 27 neighbours read per corner.
+    fn corners_next_to_the_band(sdf: &SparseSdf) -> (usize, usize) {
+        let lo_block = sdf.blocks.keys().copied().reduce(IVec3::min).unwrap();
+        let hi_block = sdf.blocks.keys().copied().reduce(IVec3::max).unwrap();
+        let lo = lo_block * BLOCK_EDGE - IVec3::splat(2);
+        let size = (hi_block - lo_block + IVec3::ONE) * BLOCK_EDGE + IVec3::splat(4);
+        let known = |p: IVec3| {
+            let (block, local) = SparseSdf::split(p + lo);
+            let v = sdf
+                .blocks
+                .get(&block)
+                .map(|b| b.values_m[local_index(local)]);
+            v.filter(|v| v.is_finite())
+        };
+        let mut outside = HashMap::new();
+        let mut queue = VecDeque::new();
+        for z in 0..size.z {
+            for y in 0..size.y {
+                for x in 0..size.x {
+                    let p = IVec3::new(x, y, z);
+                    if p.min(size - IVec3::ONE - p).min_element() == 0 {
+                        outside.insert(p, ());
+                        queue.push_back(p);
+                    }
+                }
+            }
+        }
+        while let Some(p) = queue.pop_front() {
+            for d in [IVec3::X, IVec3::Y, IVec3::Z] {
+                for q in [p - d, p + d] {
+                    let in_box = q.cmpge(IVec3::ZERO).all() && q.cmplt(size).all();
+                    if in_box && known(q).is_none() && outside.insert(q, ()).is_none() {
+                        queue.push_back(q);
+                    }
+                }
+            }
+        }
+        let (mut close, mut fill) = (0, 0);
+        for z in 1..size.z - 1 {
+            for y in 1..size.y - 1 {
+                for x in 1..size.x - 1 {
+                    let p = IVec3::new(x, y, z);
+                    if known(p).is_some() {
+                        continue;
+                    }
+                    let (mut negative, mut any) = (false, false);
+                    for dz in -1..=1 {
+                        for dy in -1..=1 {
+                            for dx in -1..=1 {
+                                if let Some(v) = known(p + IVec3::new(dx, dy, dz)) {
+                                    any = true;
+                                    negative |= v < 0.0;
+                                }
+                            }
+                        }
+                    }
+                    match outside.contains_key(&p) {
+                        true if negative => close += 1,
+                        false if any => fill += 1,
+                        _ => {}
+                    }
+                }
+            }
+        }
+        (close, fill)
+    }
+
+    /// The flood runs over corner indices and the neighbourhoods are read per axis (see
+    /// [`close_where_band_ends`]): it must find the very corners the plain way finds.
+    #[test]
+    fn closes_and_fills_the_corners_the_plain_way_finds() {
+        let mut sdf = sphere_with_thin_fin();
+        let expected = corners_next_to_the_band(&sdf);
+        let closure = close_where_band_ends(&mut sdf, 1);
+        assert_eq!((closure.closed_corners, closure.filled_corners), expected);
+        assert!(expected.0 > 0 && expected.1 > 0);
+    }
+
+    /// In place and a block at a time, as if every value were read before any was written;
+    /// the first and last `step` values stay as they were.
+    #[test]
+    fn spreading_in_blocks_reads_the_values_as_they_were() {
+        for (len, step) in [
+            (40_000usize, 1usize),
+            (40_000, 37),
+            (70_001, 20_000),
+            (5, 2),
+            (4, 2),
+        ] {
+            let values: Vec<u8> = (0..len).map(|i| ((i * 7919) % 13 == 0) as u8).collect();
+            let mut expected = values.clone();
+            for i in step..len.saturating_sub(step) {
+                expected[i] = values[i - step] | values[i] | values[i + step];
+            }
+            let mut spread = values;
+            spread_along(&mut spread, step);
+            assert_eq!(spread, expected, "{len} values, step {step}");
+        }
     }
 
     #[test]
