@@ -207,22 +207,40 @@ pub fn orient_by_propagation(planes: &mut [CellPlane], grid: &TwoScaleGrid) {
     });
 }
 
-/// An edge of the voxel adjacency graph; `BinaryHeap` pops the lowest cost first.
-#[derive(PartialEq)]
+/// An edge of the voxel adjacency graph; `BinaryHeap` pops the lowest cost first, and of equal
+/// costs the lowest `to`. The two are packed in one integer so that a comparison is one
+/// instruction (the heap's pops were a sixth of orienting): the cost's bits, mapped so that
+/// they order as `f32::total_cmp` orders the costs, above `to`.
+#[derive(PartialEq, Eq)]
 struct GraphEdge {
-    cost: f32,
-    to: u32,
+    cost_then_to: u64,
     from: u32,
 }
 
-impl Eq for GraphEdge {}
+impl GraphEdge {
+    fn new(cost: f32, to: u32, from: u32) -> Self {
+        let bits = cost.to_bits();
+        // Negative numbers order backwards in their bits: flip them all; flip the sign of the
+        // others so that they come after.
+        let ordered = if bits >> 31 == 1 {
+            !bits
+        } else {
+            bits | 1 << 31
+        };
+        Self {
+            cost_then_to: u64::from(ordered) << 32 | u64::from(to),
+            from,
+        }
+    }
+
+    fn to(&self) -> u32 {
+        self.cost_then_to as u32
+    }
+}
 
 impl Ord for GraphEdge {
     fn cmp(&self, other: &Self) -> Ordering {
-        other
-            .cost
-            .total_cmp(&self.cost)
-            .then_with(|| other.to.cmp(&self.to))
+        other.cost_then_to.cmp(&self.cost_then_to)
     }
 }
 
@@ -261,7 +279,8 @@ fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
         part.clear();
         part.push(seed);
         push_edges(&slot, planes, &reached, seed, &mut heap);
-        while let Some(GraphEdge { to, from, .. }) = heap.pop() {
+        while let Some(edge) = heap.pop() {
+            let (to, from) = (edge.to(), edge.from);
             if reached[to as usize] {
                 continue;
             }
@@ -335,7 +354,7 @@ fn push_edges(
         };
         if !reached[to as usize] {
             let cost = 1.0 - here.normal.dot(planes[to as usize].normal).abs();
-            heap.push(GraphEdge { cost, to, from });
+            heap.push(GraphEdge::new(cost, to, from));
         }
     }
 }
@@ -343,6 +362,22 @@ fn push_edges(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The packed edges order as the cost by `f32::total_cmp` and then `to`, reversed (the heap
+    /// pops the greatest): rounding can make `1 − |n·m|` a hair negative, and the edges the tree
+    /// takes must not change with the packing.
+    #[test]
+    fn packed_edges_order_as_their_costs_then_targets() {
+        let costs = [-1e-7, -0.0, 0.0, 1e-30, 0.25, 0.5, 1.0, 1.0 + 1e-7];
+        let targets = [0, 1, 7, u32::MAX];
+        for (c1, t1) in costs.into_iter().flat_map(|c| targets.map(|t| (c, t))) {
+            for (c2, t2) in costs.into_iter().flat_map(|c| targets.map(|t| (c, t))) {
+                let packed = GraphEdge::new(c1, t1, 0).cmp(&GraphEdge::new(c2, t2, 5));
+                let plain = c2.total_cmp(&c1).then(t2.cmp(&t1));
+                assert_eq!(packed, plain, "({c1}, {t1}) against ({c2}, {t2})");
+            }
+        }
+    }
 
     fn fibonacci_sphere(n: usize, radius: f32) -> Vec<Vec3> {
         let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
