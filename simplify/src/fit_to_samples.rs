@@ -229,6 +229,13 @@ pub fn fit_to_samples(mesh: &mut TriMesh, data: &FitSamples, config: &FitConfig)
                 let tri = mesh.triangles[t as usize];
                 let normal = normals[t as usize];
                 let k = tri.iter().position(|&i| i as usize == v).unwrap_or(0);
+                // Each sample's residual is n·(Σ_j b_j v_j − p); solving for v_k with the others
+                // held, the other corners enter only through n·v_j, the same for every sample
+                // of the triangle, and the system only through n nᵀ: both are taken once per
+                // triangle, and the samples add up scalars (the per-sample 3 × 3 products were
+                // most of the solve).
+                let along_normal = tri.map(|j| normal.dot(mesh.vertices[j as usize].as_dvec3()));
+                let (mut weight_sum, mut target_sum) = (0.0f64, 0.0f64);
                 for &s in &on_triangle[t as usize] {
                     let Some(a) = &assignments[s as usize] else {
                         continue;
@@ -238,21 +245,18 @@ pub fn fit_to_samples(mesh: &mut TriMesh, data: &FitSamples, config: &FitConfig)
                         continue;
                     }
                     let w = f64::from(samples[s as usize].weight);
-                    // Residual n·(Σ_j b_j v_j − p): solve for v_k with the others held.
                     let others: f64 = (0..3)
                         .filter(|&j| j != k)
-                        .map(|j| {
-                            f64::from(a.weights[j])
-                                * normal.dot(mesh.vertices[tri[j] as usize].as_dvec3())
-                        })
+                        .map(|j| f64::from(a.weights[j]) * along_normal[j])
                         .sum();
                     let target = normal.dot(samples[s as usize].point.as_dvec3()) - others;
-                    system +=
-                        DMat3::from_cols(normal * normal.x, normal * normal.y, normal * normal.z)
-                            * (w * bk * bk);
-                    rhs += normal * (w * bk * target);
-                    data_weight += w * bk * bk;
+                    weight_sum += w * bk * bk;
+                    target_sum += w * bk * target;
                 }
+                system += DMat3::from_cols(normal * normal.x, normal * normal.y, normal * normal.z)
+                    * weight_sum;
+                rhs += normal * target_sum;
+                data_weight += weight_sum;
             }
             if data_weight <= 0.0 {
                 continue;
