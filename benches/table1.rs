@@ -5,7 +5,8 @@
 //!
 //! `cargo bench --bench table1` (all noise levels, 5 seeds, and the noise × points sweep with
 //! 3 seeds) prints Markdown for BENCHMARKS.md and writes `target/table1.json`.
-//! `-- --seeds 1 --noise-mm 20 --sweep-seeds 0 --peer-seeds 0` for a quick look. The peer run
+//! `-- --seeds 1 --noise-mm 20 --sweep-seeds 0 --peer-seeds 0` for a quick look
+//! (`--one-core-rounds 0` leaves out the one-core table, issue 14's speed target). The peer run
 //! (Open3D's Poisson and quadric decimation on the same clouds, `table1/peer.rs`) needs a
 //! Python with `open3d` named by `TACMESH_PEER_PYTHON` or `--peer-python PATH`.
 
@@ -49,6 +50,8 @@ struct Options {
     peer_seeds: u64,
     /// The Python the peer runs under.
     peer_python: String,
+    /// Rounds of the one-core table (every cloud meshed once per round); 0 skips it.
+    one_core_rounds: usize,
 }
 
 fn parse_options() -> Options {
@@ -59,6 +62,7 @@ fn parse_options() -> Options {
         sweep_seeds: 3,
         peer_seeds: 3,
         peer_python: String::new(),
+        one_core_rounds: 5,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     options.peer_python = peer::python_from(&args);
@@ -70,6 +74,9 @@ fn parse_options() -> Options {
             "--points" => options.points = value.parse().expect("--points N"),
             "--sweep-seeds" => options.sweep_seeds = value.parse().expect("--sweep-seeds N"),
             "--peer-seeds" => options.peer_seeds = value.parse().expect("--peer-seeds N"),
+            "--one-core-rounds" => {
+                options.one_core_rounds = value.parse().expect("--one-core-rounds N")
+            }
             "--peer-python" => {} // read by peer::python_from
             "--noise-mm" => {
                 options.noise_mm = value
@@ -325,6 +332,65 @@ fn sweep(seeds: u64) {
     }
 }
 
+/// Issue 14's speed target, measured as it is stated: one 1 m object, 40,000 points at 20 mm
+/// noise, cloud to final mesh on one core. Five seeds per shape, each cloud meshed once per
+/// round on a one-thread pool (rounds interleave the shapes, so a drift of the machine's speed
+/// touches them alike); the pipeline's own stopwatch, as in the speed table. A median over
+/// 5 × `rounds` runs per shape is steadier than the speed table's single one-thread run per
+/// cloud.
+fn one_core(rounds: usize, one_thread: &rayon::ThreadPool) {
+    const POINTS: usize = 40_000;
+    const SEEDS: u64 = 5;
+    const TARGET_MS: f64 = 20.0;
+    println!(
+        "\n### One core: one 1 m object, {POINTS} points at 20 mm noise, cloud to final mesh \
+         (median over seeds 1–{SEEDS} × {rounds} rounds; issue 14's target {TARGET_MS} ms)\n"
+    );
+    println!("| shape | estimates | integrate | normals | orient | signed distance | marching cubes | simplify | fit | **total p50** | total p90 | meets |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let clouds: Vec<(Shape, tacmesh::PointCloud)> = PAPER_TABLE1
+        .iter()
+        .flat_map(|&(shape, ..)| {
+            (1..=SEEDS).map(move |seed| (shape, cloud_for(shape, 20.0, seed, POINTS)))
+        })
+        .collect();
+    let mut reports: Vec<Vec<MeshReport>> = vec![Vec::new(); clouds.len()];
+    for _ in 0..rounds {
+        for (i, (_, cloud)) in clouds.iter().enumerate() {
+            let (_, report) = one_thread
+                .install(|| mesh_cloud(cloud, &MeshConfig::default()))
+                .expect("pipeline runs on sampled shapes");
+            reports[i].push(report);
+        }
+    }
+    for (shape, ..) in PAPER_TABLE1 {
+        let rs: Vec<&MeshReport> = clouds
+            .iter()
+            .zip(&reports)
+            .filter(|((s, _), _)| *s == shape)
+            .flat_map(|(_, rs)| rs)
+            .collect();
+        let m = |f: &dyn Fn(&MeshReport) -> f64| median(rs.iter().map(|r| f(r)).collect());
+        let mut totals: Vec<f64> = rs.iter().map(|r| r.total_ms).collect();
+        totals.sort_by(f64::total_cmp);
+        let p50 = m(&|r| r.total_ms);
+        let p90 = totals[(totals.len() * 9 / 10).min(totals.len() - 1)];
+        println!(
+            "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | **{p50:.1}** | {p90:.1} | {} |",
+            shape.name(),
+            m(&|r| r.estimate_ms),
+            m(&|r| r.integrate_ms),
+            m(&|r| r.normals_ms),
+            m(&|r| r.orient_ms),
+            m(&|r| r.distance_ms),
+            m(&|r| r.marching_cubes_ms),
+            m(&|r| r.simplify_ms),
+            m(&|r| r.fit_ms),
+            if p50 <= TARGET_MS { "yes" } else { "no" },
+        );
+    }
+}
+
 fn main() {
     let options = parse_options();
     if options.sweep_seeds > 0 {
@@ -530,6 +596,9 @@ fn main() {
     }
 
     error_target_mode(options.seeds, options.points);
+    if options.one_core_rounds > 0 {
+        one_core(options.one_core_rounds, &one_thread);
+    }
     if options.peer_seeds > 0 {
         peer::peer_run(
             &options.peer_python,
