@@ -25,7 +25,8 @@ use glam::IVec3;
 
 use crate::sparse_sdf::{local_index, SparseSdf, BLOCK_EDGE};
 
-/// Largest box of corners the fill walks (512³, a byte each); a larger grid is left as it is.
+/// Largest box of corners the fill walks (512³; two bytes each, a corner's state and its
+/// neighbourhood's flags); a larger grid is left as it is.
 const MAX_CORNERS: usize = 1 << 27;
 
 /// Largest share of the band's outward edge (known corners next to outside unknown ones) that
