@@ -175,7 +175,7 @@ struct CentredBox {
 /// over the list of cells. The estimate runs before meshing starts, once or up to four times.
 /// A box centred on every cell took 2 ms a run for the 1 m cube's 4,860 cells on one core, most
 /// of it in the plane fits; fitting them in parallel did not shorten it on two cores. Boxes on
-/// every `k`-th cell, at most [`MAX_BOXES`], take 0.6 ms.
+/// every `k`-th cell, at most [`MAX_BOXES`], take about 0.7 ms.
 fn centred_boxes(points: &[Vec3], cell_m: f32) -> Vec<CentredBox> {
     let (cells, moments) = sorted_voxel_moments(points, cell_m);
     let index = CellIndex::new(&cells);

@@ -232,8 +232,7 @@ pub fn fit_to_samples(mesh: &mut TriMesh, data: &FitSamples, config: &FitConfig)
                 // Each sample's residual is n·(Σ_j b_j v_j − p); solving for v_k with the others
                 // held, the other corners enter only through n·v_j, the same for every sample
                 // of the triangle, and the system only through n nᵀ: both are taken once per
-                // triangle, and the samples add up scalars (the per-sample 3 × 3 products were
-                // most of the solve).
+                // triangle, and the samples add up scalars (they each added a 3 × 3 product).
                 let along_normal = tri.map(|j| normal.dot(mesh.vertices[j as usize].as_dvec3()));
                 let (mut weight_sum, mut target_sum) = (0.0f64, 0.0f64);
                 for &s in &on_triangle[t as usize] {
