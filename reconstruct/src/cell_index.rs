@@ -16,6 +16,17 @@ use crate::moments::PointMoments;
 
 const NONE: u32 = u32::MAX;
 
+/// The steps to the six voxels that share a face with a voxel, in the order the callers walk
+/// them (orientation's spanning tree pushes its edges in this order, so it decides ties).
+pub(crate) const FACE_STEPS: [IVec3; 6] = [
+    IVec3::X,
+    IVec3::NEG_X,
+    IVec3::Y,
+    IVec3::NEG_Y,
+    IVec3::Z,
+    IVec3::NEG_Z,
+];
+
 /// The index's dense array may hold at most this many entries per listed voxel (4 bytes each).
 const MAX_BOX_CELLS_PER_CELL: i64 = 64;
 /// A dense array over a [`CellBox`] may have this many cells whatever the list's length...

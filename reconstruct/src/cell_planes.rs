@@ -14,7 +14,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use crate::cell_index::CellIndex;
+use crate::cell_index::{CellIndex, FACE_STEPS};
 use crate::moment_grid::MomentGrid;
 use crate::moments::PointMoments;
 use glam::{IVec3, Vec3};
@@ -341,14 +341,7 @@ fn push_edges(
     let here = planes[from as usize];
     // Face neighbours only: the noisy surface is several voxels thick, so it stays connected,
     // and the tree is built from a quarter of the edges of the full 26-neighbourhood.
-    for step in [
-        IVec3::X,
-        IVec3::NEG_X,
-        IVec3::Y,
-        IVec3::NEG_Y,
-        IVec3::Z,
-        IVec3::NEG_Z,
-    ] {
+    for step in FACE_STEPS {
         let Some(to) = slot.get(here.cell + step) else {
             continue;
         };

@@ -23,6 +23,7 @@
 
 use glam::IVec3;
 
+use crate::cell_index::FACE_STEPS;
 use crate::sparse_sdf::{local_index, SparseSdf, BLOCK_EDGE};
 
 /// Largest box of corners the fill walks (512³; two bytes each, a corner's state and its
@@ -179,14 +180,7 @@ pub fn close_where_band_ends(sdf: &mut SparseSdf, erode_layers: i32) -> BandClos
     for _ in 0..erode_layers {
         let mut eroded = Vec::new();
         for &ijk in &front {
-            for step in [
-                IVec3::X,
-                IVec3::NEG_X,
-                IVec3::Y,
-                IVec3::NEG_Y,
-                IVec3::Z,
-                IVec3::NEG_Z,
-            ] {
+            for step in FACE_STEPS {
                 let q = ijk - lo + step;
                 if state[at(q)] == NEGATIVE {
                     state[at(q)] = OUTSIDE;
