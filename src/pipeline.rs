@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 use tacmesh_physics::orientation::{orient_outward, orientation};
-use tacmesh_reconstruct::moment_grid::MomentGrid;
+use tacmesh_reconstruct::moment_grid::{MomentGrid, SortedVoxels};
 use tacmesh_reconstruct::noise::estimate_noise_and_density;
 #[cfg(doc)]
 use tacmesh_reconstruct::noise::{estimate_noise_m, estimate_points_per_m2};
@@ -674,7 +674,7 @@ struct FitStep {
 /// simplify, fit and orientation fields of the report.
 fn simplify_and_fit(
     dense: &TriMesh,
-    coarse_grid: &MomentGrid,
+    coarse_grid: &SortedVoxels,
     max_residual_m: f32,
     FitStep {
         fit_to_data,
@@ -698,10 +698,9 @@ fn simplify_and_fit(
         // Centroids of voxels twice the reconstruction's: a quarter of the samples, each the
         // mean of several points, and still far finer than the simplified triangles.
         let samples: Vec<WeightedSample> = coarse_grid
-            .sorted_cells()
-            .into_iter()
-            .filter_map(|cell| {
-                let m = coarse_grid.get(cell)?;
+            .moments
+            .iter()
+            .filter_map(|m| {
                 Some(WeightedSample {
                     point: m.centroid()?,
                     weight: m.count as f32,

@@ -15,7 +15,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use crate::cell_index::{CellIndex, FACE_STEPS};
-use crate::moment_grid::MomentGrid;
+use crate::moment_grid::{MomentGrid, SortedVoxels};
 use crate::moments::PointMoments;
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
@@ -42,14 +42,15 @@ impl CellPlane {
 /// The fused points at two scales: the voxels, and voxels twice as large with their planes.
 pub struct TwoScaleGrid<'a> {
     pub fine: &'a MomentGrid,
-    pub coarse: MomentGrid,
-    /// The coarse voxels' moments in (z, y, x) order of their voxels, and where each voxel is:
-    /// the fits below read them by cell dozens of times each.
-    coarse_moments: Vec<PointMoments>,
+    /// The fine voxels' cells in (z, y, x) order.
+    fine_cells: Vec<IVec3>,
+    /// The coarse voxels in (z, y, x) order with their moments: the fits below read them by
+    /// cell dozens of times each, through `coarse_index`.
+    pub coarse: SortedVoxels,
     coarse_index: CellIndex,
     /// A plane per coarse voxel (see [`fit_coarse_planes`]), unoriented.
     pub coarse_planes: Vec<CellPlane>,
-    /// For each coarse voxel (in `coarse_cells` order), its plane's index in `coarse_planes`;
+    /// For each coarse voxel (in `coarse.cells` order), its plane's index in `coarse_planes`;
     /// `NO_PLANE` when too few points fit one.
     plane_of_coarse: Vec<u32>,
 }
@@ -58,19 +59,16 @@ const NO_PLANE: u32 = u32::MAX;
 
 impl<'a> TwoScaleGrid<'a> {
     pub fn new(fine: &'a MomentGrid) -> Self {
-        let coarse = fine.coarsened(2);
-        let coarse_cells = coarse.sorted_cells();
-        let coarse_moments: Vec<PointMoments> = coarse_cells
-            .iter()
-            .map(|&cell| coarse.get(cell).copied().unwrap_or_default())
-            .collect();
-        let coarse_index = CellIndex::new(&coarse_cells);
+        let fine_voxels = fine.sorted_voxels();
+        let coarse = SortedVoxels::coarsened(&fine_voxels, 2, fine.voxel_size_m());
+        let fine_cells = fine_voxels.iter().map(|&(cell, _)| cell).collect();
+        let coarse_index = CellIndex::new(&coarse.cells);
         let (coarse_planes, plane_of_coarse) =
-            fit_coarse_planes(&coarse_cells, &coarse_moments, &coarse_index);
+            fit_coarse_planes(&coarse.cells, &coarse.moments, &coarse_index);
         Self {
             fine,
+            fine_cells,
             coarse,
-            coarse_moments,
             coarse_index,
             coarse_planes,
             plane_of_coarse,
@@ -102,7 +100,7 @@ impl<'a> TwoScaleGrid<'a> {
             for dy in 0..2 {
                 for dx in 0..2 {
                     if let Some(slot) = self.coarse_index.get(first + IVec3::new(dx, dy, dz)) {
-                        sum += &self.coarse_moments[slot as usize];
+                        sum += &self.coarse.moments[slot as usize];
                     }
                 }
             }
@@ -153,8 +151,7 @@ fn fit_coarse_planes(
 /// little better than random. Normals are unoriented.
 pub fn fit_cell_planes(grid: &TwoScaleGrid, min_points: f32) -> Vec<CellPlane> {
     let voxel = grid.fine.voxel_size_m();
-    grid.fine
-        .sorted_cells()
+    grid.fine_cells
         .par_iter()
         .filter_map(|&cell| {
             let around = grid.box_around(cell);

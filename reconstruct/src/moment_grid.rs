@@ -128,30 +128,12 @@ impl MomentGrid {
         self.cells.is_empty()
     }
 
-    /// The same points in voxels `factor` times larger (moments add, so no point is revisited).
-    /// Each coarse voxel adds its voxels in (z, y, x) order, so the result never depends on
-    /// hash order; the voxels are sorted with their moments beside them rather than looked up
-    /// again by key.
-    pub fn coarsened(&self, factor: i32) -> MomentGrid {
-        let factor = factor.max(1);
+    /// The occupied voxels in (z, y, x) order, each with its moments (borrowed, not copied).
+    pub fn sorted_voxels(&self) -> Vec<(IVec3, &PointMoments)> {
         let mut voxels: Vec<(IVec3, &PointMoments)> =
             self.cells.iter().map(|(&cell, m)| (cell, m)).collect();
         sort_zyx(&mut voxels, |&(cell, _)| cell);
-        let mut coarse = MomentGrid::new(self.voxel_size_m * factor as f32);
-        coarse
-            .cells
-            .reserve(voxels.len() / (factor * factor) as usize);
-        // A shift for a power of two: `div_euclid` by a value not known at compile time is
-        // three integer divisions a voxel.
-        let shift = (factor.count_ones() == 1).then(|| factor.trailing_zeros() as i32);
-        let parent = |cell: IVec3| match shift {
-            Some(shift) => cell >> shift,
-            None => cell.div_euclid(IVec3::splat(factor)),
-        };
-        for (cell, m) in voxels {
-            *coarse.cells.entry(parent(cell)).or_default() += m;
-        }
-        coarse
+        voxels
     }
 
     /// Whether any voxel within `radius` voxels (a cube) of `cell` holds points: the
@@ -178,6 +160,57 @@ impl MomentGrid {
             }
         }
         sum
+    }
+}
+
+/// Voxels with their moments in (z, y, x) order of their cells: a grid that is read in order
+/// and by position (the plane fits' dense index, the fit's samples), never looked up by key,
+/// so it needs no map.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SortedVoxels {
+    pub voxel_size_m: f32,
+    pub cells: Vec<IVec3>,
+    /// `moments[i]` are those of `cells[i]`.
+    pub moments: Vec<PointMoments>,
+}
+
+impl SortedVoxels {
+    /// The points of `voxels` (distinct cells of edge `voxel_size_m`, in (z, y, x) order, as
+    /// [`MomentGrid::sorted_voxels`] gives them) in voxels `factor` times larger. Each coarse
+    /// voxel adds its voxels in their (z, y, x) order, so the sums never depend on hash order.
+    ///
+    /// The voxels are put in order of their coarse voxel by a stable sort, which keeps each
+    /// coarse voxel's own in (z, y, x) order, and each run is summed where it lies: adding
+    /// every voxel into a map by its coarse key took a hash look-up per fine voxel (a 1 m
+    /// cube's 15,000 at 20 mm noise: 4 % of the one-core pipeline), and the callers then sorted
+    /// the map's keys again and looked each one up.
+    pub fn coarsened(voxels: &[(IVec3, &PointMoments)], factor: i32, voxel_size_m: f32) -> Self {
+        let factor = factor.max(1);
+        // A shift for a power of two: `div_euclid` by a value not known at compile time is
+        // three integer divisions a voxel.
+        let shift = (factor.count_ones() == 1).then(|| factor.trailing_zeros() as i32);
+        let parent = |cell: IVec3| match shift {
+            Some(shift) => cell >> shift,
+            None => cell.div_euclid(IVec3::splat(factor)),
+        };
+        let mut by_parent: Vec<(IVec3, &PointMoments)> =
+            voxels.iter().map(|&(cell, m)| (parent(cell), m)).collect();
+        sort_zyx(&mut by_parent, |&(parent, _)| parent);
+        let mut coarse = SortedVoxels {
+            voxel_size_m: voxel_size_m * factor as f32,
+            cells: Vec::with_capacity(voxels.len() / (factor * factor) as usize),
+            moments: Vec::with_capacity(voxels.len() / (factor * factor) as usize),
+        };
+        for (cell, m) in by_parent {
+            if coarse.cells.last() != Some(&cell) {
+                coarse.cells.push(cell);
+                coarse.moments.push(PointMoments::default());
+            }
+            if let Some(sum) = coarse.moments.last_mut() {
+                *sum += m;
+            }
+        }
+        coarse
     }
 }
 
@@ -454,21 +487,59 @@ mod tests {
 
     #[test]
     fn coarsening_keeps_every_point() {
+        let count_at = |coarse: &SortedVoxels, cell: IVec3| {
+            let at = coarse.cells.iter().position(|&c| c == cell)?;
+            Some(coarse.moments[at].count)
+        };
         let mut grid = MomentGrid::new(0.1);
         grid.integrate(&[Vec3::splat(0.05), Vec3::splat(0.15), Vec3::splat(-0.05)]);
-        let coarse = grid.coarsened(2);
-        assert_eq!(coarse.get(IVec3::ZERO).map(|m| m.count), Some(2.0));
-        assert_eq!(coarse.get(IVec3::splat(-1)).map(|m| m.count), Some(1.0));
+        let coarse = SortedVoxels::coarsened(&grid.sorted_voxels(), 2, grid.voxel_size_m());
+        assert_eq!(count_at(&coarse, IVec3::ZERO), Some(2.0));
+        assert_eq!(count_at(&coarse, IVec3::splat(-1)), Some(1.0));
         // A factor that is not a power of two: voxels -3..=2 of 0.1 m by threes.
         let mut grid = MomentGrid::new(0.1);
         let points: Vec<Vec3> = (-3..=2)
             .map(|i| Vec3::new(i as f32 * 0.1 + 0.05, 0.05, 0.05))
             .collect();
         grid.integrate(&points);
-        let coarse = grid.coarsened(3);
-        assert_eq!(coarse.len(), 2);
-        assert_eq!(coarse.get(IVec3::new(-1, 0, 0)).map(|m| m.count), Some(3.0));
-        assert_eq!(coarse.get(IVec3::ZERO).map(|m| m.count), Some(3.0));
+        let coarse = SortedVoxels::coarsened(&grid.sorted_voxels(), 3, grid.voxel_size_m());
+        assert_eq!(coarse.cells.len(), 2);
+        assert_eq!(count_at(&coarse, IVec3::new(-1, 0, 0)), Some(3.0));
+        assert_eq!(count_at(&coarse, IVec3::ZERO), Some(3.0));
+    }
+
+    /// The sorted coarsening lists every coarse voxel once, in (z, y, x) order, with the sum of
+    /// its voxels added in their (z, y, x) order, as adding them into a map one by one does:
+    /// the same moments to the bit, for factors that are powers of two and one that is not.
+    #[test]
+    fn sorted_coarsening_sums_each_coarse_voxel_as_the_map_does() {
+        let points: Vec<Vec3> = (0..3_000)
+            .map(|i| {
+                let t = i as f32 * 0.618_034;
+                Vec3::new(t.sin(), (1.3 * t).cos(), (0.7 * t).sin()) * 0.4
+            })
+            .collect();
+        let mut grid = MomentGrid::new(0.03);
+        grid.integrate(&points);
+        let voxels = grid.sorted_voxels();
+        for factor in [1, 2, 3, 4] {
+            let coarse = SortedVoxels::coarsened(&voxels, factor, grid.voxel_size_m());
+            let mut expected: FxHashMap<IVec3, PointMoments> = FxHashMap::default();
+            for &(cell, m) in &voxels {
+                *expected
+                    .entry(cell.div_euclid(IVec3::splat(factor)))
+                    .or_default() += m;
+            }
+            assert_eq!(coarse.cells.len(), expected.len());
+            assert!(coarse
+                .cells
+                .windows(2)
+                .all(|w| (w[0].z, w[0].y, w[0].x) < (w[1].z, w[1].y, w[1].x)));
+            for (cell, m) in coarse.cells.iter().zip(&coarse.moments) {
+                assert_eq!(Some(m), expected.get(cell), "{cell} by {factor}");
+            }
+            assert_eq!(coarse.voxel_size_m, 0.03 * factor as f32);
+        }
     }
 
     #[test]

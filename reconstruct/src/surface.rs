@@ -15,7 +15,7 @@ use crate::cell_planes::{
 };
 use crate::enclosed_band::close_where_band_ends;
 use crate::marching_cubes::marching_cubes;
-use crate::moment_grid::MomentGrid;
+use crate::moment_grid::{MomentGrid, SortedVoxels};
 use crate::signed_distance::{signed_distance_near, SignedDistanceConfig};
 use crate::ReconstructError;
 
@@ -150,7 +150,7 @@ pub struct Reconstruction {
     pub mesh: TriMesh,
     /// The fused points in voxels twice the reconstruction's (the scale its normals were
     /// fitted at), for later stages to fit to: made once here rather than again by them.
-    pub coarse_grid: MomentGrid,
+    pub coarse_grid: SortedVoxels,
     pub report: ReconstructReport,
 }
 
