@@ -255,27 +255,32 @@ impl PartialOrd for GraphEdge {
 fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
     let cells: Vec<IVec3> = planes.iter().map(|p| p.cell).collect();
     let slot = CellIndex::new(&cells);
-    let mut order: Vec<u32> = (0..planes.len() as u32).collect();
-    order.sort_by(|&a, &b| {
-        planes[b as usize]
-            .point
-            .z
-            .total_cmp(&planes[a as usize].point.z)
-    });
     let mut reached = vec![false; planes.len()];
     let mut heap = BinaryHeap::new();
     let mut part = Vec::new();
-    for &seed in &order {
-        if reached[seed as usize] {
-            continue;
+    // Seeds go highest first, of equal heights the lowest index first. An object's planes are
+    // usually one part, which the highest plane reaches whole: it is found by a scan, and the
+    // others are sorted only if some remain unreached (sorting them all up front was 1.4 % of
+    // meshing a 1 m cube on one core).
+    let highest = (0..planes.len() as u32).reduce(|best, i| {
+        let (z, best_z) = (planes[i as usize].point.z, planes[best as usize].point.z);
+        if z.total_cmp(&best_z) == Ordering::Greater {
+            i
+        } else {
+            best
         }
+    });
+    let Some(highest) = highest else {
+        return;
+    };
+    let mut grow = |seed: u32, planes: &mut [CellPlane], reached: &mut [bool]| {
         reached[seed as usize] = true;
         if planes[seed as usize].normal.z < 0.0 {
             planes[seed as usize].normal = -planes[seed as usize].normal;
         }
         part.clear();
         part.push(seed);
-        push_edges(&slot, planes, &reached, seed, &mut heap);
+        push_edges(&slot, planes, reached, seed, &mut heap);
         while let Some(edge) = heap.pop() {
             let (to, from) = (edge.to(), edge.from);
             if reached[to as usize] {
@@ -286,9 +291,24 @@ fn orient_by_spanning_tree(planes: &mut [CellPlane]) {
             if planes[to as usize].normal.dot(planes[from as usize].normal) < 0.0 {
                 planes[to as usize].normal = -planes[to as usize].normal;
             }
-            push_edges(&slot, planes, &reached, to, &mut heap);
+            push_edges(&slot, planes, reached, to, &mut heap);
         }
         face_extremes_out(planes, &part);
+    };
+    grow(highest, planes, &mut reached);
+    let mut rest: Vec<u32> = (0..planes.len() as u32)
+        .filter(|&i| !reached[i as usize])
+        .collect();
+    rest.sort_by(|&a, &b| {
+        planes[b as usize]
+            .point
+            .z
+            .total_cmp(&planes[a as usize].point.z)
+    });
+    for seed in rest {
+        if !reached[seed as usize] {
+            grow(seed, planes, &mut reached);
+        }
     }
 }
 
@@ -395,6 +415,36 @@ mod tests {
             let outward = plane.point.normalize();
             assert!(plane.normal.dot(outward) > 0.95, "{plane:?}");
         }
+    }
+
+    /// Two spheres apart are two parts: the lower one is seeded after the higher one's tree
+    /// is grown, and both come out facing out.
+    #[test]
+    fn propagation_orients_every_part() {
+        let mut points = fibonacci_sphere(12_000, 0.3);
+        let below = Vec3::new(1.5, 0.2, -1.0);
+        points.extend(fibonacci_sphere(12_000, 0.3).into_iter().map(|p| p + below));
+        let mut grid = MomentGrid::new(0.02);
+        grid.integrate(&points);
+        let two = TwoScaleGrid::new(&grid);
+        let mut planes = fit_cell_planes(&two, MIN_POINTS);
+        orient_by_propagation(&mut planes, &two);
+        let (mut upper, mut lower) = (0, 0);
+        for plane in &planes {
+            let centre = if plane.point.z < -0.5 {
+                below
+            } else {
+                Vec3::ZERO
+            };
+            let outward = (plane.point - centre).normalize();
+            assert!(plane.normal.dot(outward) > 0.95, "{plane:?}");
+            if centre == Vec3::ZERO {
+                upper += 1;
+            } else {
+                lower += 1;
+            }
+        }
+        assert!(upper > 500 && lower > 500, "{upper} and {lower} planes");
     }
 
     #[test]
