@@ -60,6 +60,14 @@ impl CellBox {
         (box_cells <= limit).then_some(Self { min, dims })
     }
 
+    /// The box with `by` more cells on every side.
+    fn grown(self, by: i64) -> Self {
+        Self {
+            min: self.min - by,
+            dims: self.dims + 2 * by,
+        }
+    }
+
     /// Cells in the box.
     pub(crate) fn len(&self) -> usize {
         (self.dims.x * self.dims.y * self.dims.z) as usize
@@ -91,7 +99,10 @@ pub struct CellIndex {
 
 #[derive(Debug, Clone)]
 enum Lookup {
-    /// `slots[cells.slot(cell)]` for each cell in the box.
+    /// `slots[cells.slot(cell)]` for each cell in the box, which reaches one cell beyond the
+    /// listed cells on every side: the boxes of neighbours that the fits read around a listed
+    /// cell lie inside it, and are read by stepping through the array (see
+    /// [`CellIndex::moments_in_box`]).
     Dense {
         cells: CellBox,
         slots: Vec<u32>,
@@ -105,6 +116,7 @@ impl CellIndex {
         let compact =
             CellBox::compact_around(cells.iter().copied(), cells.len(), MAX_BOX_CELLS_PER_CELL);
         let lookup = if let Some(cell_box) = compact {
+            let cell_box = cell_box.grown(1);
             let mut slots = vec![NONE; cell_box.len()];
             for (i, &cell) in cells.iter().enumerate() {
                 slots[cell_box.slot_inside(cell)] = i as u32;
@@ -129,11 +141,48 @@ impl CellIndex {
     /// of the 3 × 3 × 3 box around `cell`, added in (z, y, x) order as
     /// [`crate::moment_grid::MomentGrid::neighbourhood`] adds them: the same sum to the bit.
     pub fn moments_around(&self, moments: &[PointMoments], cell: IVec3) -> PointMoments {
+        self.moments_in_box::<3>(moments, cell - IVec3::ONE)
+    }
+
+    /// The sum of `moments` over the listed cells of the `N` × `N` × `N` box whose lowest
+    /// cell is `first`, added in (z, y, x) order.
+    ///
+    /// A box inside the dense array (any box reaching at most one cell beyond the listed ones)
+    /// is read by stepping through the array from its first cell: looking each cell up with
+    /// its own bounds checks was most of the time the plane fits spent on their 27 and 8
+    /// neighbours (5 % of meshing a 1 m cube on one core).
+    pub fn moments_in_box<const N: i32>(
+        &self,
+        moments: &[PointMoments],
+        first: IVec3,
+    ) -> PointMoments {
         let mut sum = PointMoments::default();
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    if let Some(slot) = self.get(cell + IVec3::new(dx, dy, dz)) {
+        if let Lookup::Dense { cells, slots } = &self.lookup {
+            let inside = cells
+                .slot(first)
+                .zip(cells.slot(first + IVec3::splat(N - 1)));
+            if let Some((base, _)) = inside {
+                let (row, layer) = (
+                    cells.dims.x as usize,
+                    (cells.dims.x * cells.dims.y) as usize,
+                );
+                for dz in 0..N as usize {
+                    for dy in 0..N as usize {
+                        let start = base + dz * layer + dy * row;
+                        for &slot in &slots[start..start + N as usize] {
+                            if slot != NONE {
+                                sum += &moments[slot as usize];
+                            }
+                        }
+                    }
+                }
+                return sum;
+            }
+        }
+        for dz in 0..N {
+            for dy in 0..N {
+                for dx in 0..N {
+                    if let Some(slot) = self.get(first + IVec3::new(dx, dy, dz)) {
                         sum += &moments[slot as usize];
                     }
                 }
@@ -181,6 +230,25 @@ mod tests {
                     index.moments_around(&moments, probe),
                     grid.neighbourhood(probe, 1),
                     "{probe}"
+                );
+            }
+            // The 2 × 2 × 2 boxes the fine planes read, from either side of the cell, against
+            // the same cells looked up one by one (the path for boxes outside the array).
+            for first in [cell - IVec3::ONE, cell, cell + IVec3::new(1, -2, 0)] {
+                let mut expected = PointMoments::default();
+                for dz in 0..2 {
+                    for dy in 0..2 {
+                        for dx in 0..2 {
+                            if let Some(m) = grid.get(first + IVec3::new(dx, dy, dz)) {
+                                expected += m;
+                            }
+                        }
+                    }
+                }
+                assert_eq!(
+                    index.moments_in_box::<2>(&moments, first),
+                    expected,
+                    "{first}"
                 );
             }
         }

@@ -95,17 +95,8 @@ impl<'a> TwoScaleGrid<'a> {
         let parent = cell >> 1; // floor(cell / 2), without a division
         let odd = cell - parent * 2; // 0 or 1 per axis
         let first = parent + odd - IVec3::ONE;
-        let mut sum = PointMoments::default();
-        for dz in 0..2 {
-            for dy in 0..2 {
-                for dx in 0..2 {
-                    if let Some(slot) = self.coarse_index.get(first + IVec3::new(dx, dy, dz)) {
-                        sum += &self.coarse.moments[slot as usize];
-                    }
-                }
-            }
-        }
-        sum
+        self.coarse_index
+            .moments_in_box::<2>(&self.coarse.moments, first)
     }
 }
 
