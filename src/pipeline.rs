@@ -366,8 +366,12 @@ pub fn robust_extent_m(points: &[Vec3]) -> Option<f32> {
         let last = values.len() - 1;
         let lo_rank = last * 2 / 100;
         let hi_rank = last - lo_rank;
-        let lo = *values.select_nth_unstable_by(lo_rank, f32::total_cmp).1;
-        let hi = *values.select_nth_unstable_by(hi_rank, f32::total_cmp).1;
+        let (_, &mut lo, above) = values.select_nth_unstable_by(lo_rank, f32::total_cmp);
+        // Everything above the low rank is no smaller: the high rank is found among those.
+        let hi = match hi_rank.checked_sub(lo_rank + 1) {
+            Some(rank) => *above.select_nth_unstable_by(rank, f32::total_cmp).1,
+            None => lo,
+        };
         extent = extent.max(hi - lo);
     }
     Some(extent)
