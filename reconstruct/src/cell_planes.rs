@@ -89,14 +89,13 @@ impl<'a> TwoScaleGrid<'a> {
         self.coarse_planes.get(self.parent_plane_index(cell)?)
     }
 
-    /// Moments of the 4×4×4 fine voxels centred on `cell`: the 2×2×2 coarse voxels on the side
-    /// of `cell`'s own coarse voxel that it is nearest to.
-    fn box_around(&self, cell: IVec3) -> PointMoments {
+    /// The lowest coarse voxel of the box of 2×2×2 coarse voxels (4×4×4 fine voxels) centred
+    /// on fine voxel `cell`: the coarse voxels on the side of `cell`'s own that it is nearest
+    /// to.
+    fn box_first(cell: IVec3) -> IVec3 {
         let parent = cell >> 1; // floor(cell / 2), without a division
         let odd = cell - parent * 2; // 0 or 1 per axis
-        let first = parent + odd - IVec3::ONE;
-        self.coarse_index
-            .moments_in_box::<2>(&self.coarse.moments, first)
+        parent + odd - IVec3::ONE
     }
 }
 
@@ -142,10 +141,19 @@ fn fit_coarse_planes(
 /// little better than random. Normals are unoriented.
 pub fn fit_cell_planes(grid: &TwoScaleGrid, min_points: f32) -> Vec<CellPlane> {
     let voxel = grid.fine.voxel_size_m();
+    let firsts: Vec<IVec3> = grid
+        .fine_cells
+        .iter()
+        .map(|&cell| TwoScaleGrid::box_first(cell))
+        .collect();
+    let (box_of, boxes) = grid
+        .coarse_index
+        .moments_in_boxes::<2>(&grid.coarse.moments, &firsts);
     grid.fine_cells
         .par_iter()
-        .filter_map(|&cell| {
-            let around = grid.box_around(cell);
+        .zip(&box_of)
+        .filter_map(|(&cell, &b)| {
+            let around = &boxes[b as usize];
             if around.count < f64::from(min_points.max(3.0)) {
                 return None;
             }
