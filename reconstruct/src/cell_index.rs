@@ -27,6 +27,33 @@ pub(crate) const FACE_STEPS: [IVec3; 6] = [
     IVec3::NEG_Z,
 ];
 
+/// The cell of step `step` (a positive number of cells) that holds `cell`:
+/// `cell.div_euclid(step)` per axis. The steps the pipeline uses (1 to 4) are matched to constants, which the compiler
+/// turns into shifts and multiplications: with the step known only at run time,
+/// `IVec3::div_euclid` is three integer divisions. The signed distance divides each plane's
+/// cell by its corner step four times (1.4 % of the one-core pipeline on the cube), and the
+/// coarse grid each fine voxel by two.
+#[inline(always)]
+pub(crate) fn floor_div(cell: IVec3, step: i32) -> IVec3 {
+    match step {
+        1 => cell,
+        2 => cell >> 1,
+        3 => floor_div_by::<3>(cell),
+        4 => cell >> 2,
+        _ => cell.div_euclid(IVec3::splat(step)),
+    }
+}
+
+/// `cell.div_euclid(D)` per axis, with `D` a constant.
+#[inline(always)]
+fn floor_div_by<const D: i32>(cell: IVec3) -> IVec3 {
+    IVec3::new(
+        cell.x.div_euclid(D),
+        cell.y.div_euclid(D),
+        cell.z.div_euclid(D),
+    )
+}
+
 /// The index's dense array may hold at most this many entries per listed voxel (4 bytes each).
 const MAX_BOX_CELLS_PER_CELL: i64 = 64;
 /// A dense array over a [`CellBox`] may have this many cells whatever the list's length...
@@ -243,6 +270,22 @@ impl CellIndex {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The constant steps and the general one floor as `div_euclid` does, on both sides of
+    /// zero.
+    #[test]
+    fn floor_division_by_the_step_is_div_euclid() {
+        for step in 1..=7 {
+            for x in -200..=200 {
+                let v = IVec3::new(x, -x, x / 3 - 7);
+                assert_eq!(
+                    floor_div(v, step),
+                    v.div_euclid(IVec3::splat(step)),
+                    "{v} / {step}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn moments_around_a_cell_are_the_grids_neighbourhood_to_the_bit() {

@@ -8,7 +8,7 @@
 use glam::{IVec3, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::cell_index::CellBox;
+use crate::cell_index::{floor_div, CellBox};
 use crate::moments::PointMoments;
 
 /// Sparse voxel grid of point moments.
@@ -186,15 +186,10 @@ impl SortedVoxels {
     /// the map's keys again and looked each one up.
     pub fn coarsened(voxels: &[(IVec3, &PointMoments)], factor: i32, voxel_size_m: f32) -> Self {
         let factor = factor.max(1);
-        // A shift for a power of two: `div_euclid` by a value not known at compile time is
-        // three integer divisions a voxel.
-        let shift = (factor.count_ones() == 1).then(|| factor.trailing_zeros() as i32);
-        let parent = |cell: IVec3| match shift {
-            Some(shift) => cell >> shift,
-            None => cell.div_euclid(IVec3::splat(factor)),
-        };
-        let mut by_parent: Vec<(IVec3, &PointMoments)> =
-            voxels.iter().map(|&(cell, m)| (parent(cell), m)).collect();
+        let mut by_parent: Vec<(IVec3, &PointMoments)> = voxels
+            .iter()
+            .map(|&(cell, m)| (floor_div(cell, factor), m))
+            .collect();
         sort_zyx(&mut by_parent, |&(parent, _)| parent);
         let mut coarse = SortedVoxels {
             voxel_size_m: voxel_size_m * factor as f32,

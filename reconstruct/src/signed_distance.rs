@@ -16,6 +16,7 @@ use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
+use crate::cell_index::floor_div;
 use crate::cell_planes::CellPlane;
 use crate::sparse_sdf::{local_index, SdfBlock, SparseSdf, BLOCK_EDGE, BLOCK_VOXELS};
 
@@ -32,28 +33,6 @@ pub struct SignedDistanceConfig {
     /// corner), so the grid it returns has cells `corner_step` voxels wide; the planes, the
     /// band and the kernel stay those of the voxels.
     pub corner_step: i32,
-}
-
-/// `v.div_euclid(step)` per axis, for a positive `step`. The steps the pipeline uses (1 to 3)
-/// are matched to constants, which the compiler turns into shifts and multiplications: with the
-/// step known only at run time, `IVec3::div_euclid` was three integer divisions, called twice
-/// per plane here and twice more per plane for its windows (1.4 % of the one-core pipeline on
-/// the cube).
-#[inline(always)]
-fn floor_div(v: IVec3, step: i32) -> IVec3 {
-    match step {
-        1 => v,
-        2 => v >> 1,
-        3 => floor_div_by::<3>(v),
-        4 => v >> 2,
-        _ => v.div_euclid(IVec3::splat(step)),
-    }
-}
-
-/// `v.div_euclid(D)` per axis, with `D` a constant.
-#[inline(always)]
-fn floor_div_by<const D: i32>(v: IVec3) -> IVec3 {
-    IVec3::new(v.x.div_euclid(D), v.y.div_euclid(D), v.z.div_euclid(D))
 }
 
 /// For every block, the planes in its window: the voxels `block · span + [−band, span + band)`
@@ -234,18 +213,13 @@ pub fn signed_distance_near(planes: &[CellPlane], config: &SignedDistanceConfig)
 mod tests {
     use super::*;
 
-    /// The constant steps, the general one and the window's shift-then-divide all floor as
-    /// `div_euclid` does, on both sides of zero.
+    /// The window's shift-then-divide floors as `div_euclid` by the block's voxels does, on
+    /// both sides of zero.
     #[test]
-    fn floor_division_by_the_step_is_div_euclid() {
+    fn window_division_is_div_euclid() {
         for step in 1..=7 {
             for x in -200..=200 {
                 let v = IVec3::new(x, -x, x / 3 - 7);
-                assert_eq!(
-                    floor_div(v, step),
-                    v.div_euclid(IVec3::splat(step)),
-                    "{v} / {step}"
-                );
                 assert_eq!(
                     floor_div(v >> BLOCK_EDGE.trailing_zeros(), step),
                     v.div_euclid(IVec3::splat(BLOCK_EDGE * step)),
