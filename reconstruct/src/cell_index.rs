@@ -227,17 +227,19 @@ impl CellIndex {
         moments: &[PointMoments],
         firsts: &[IVec3],
     ) -> (Vec<u32>, Vec<PointMoments>) {
+        let Lookup::Dense { cells, slots } = &self.lookup else {
+            // No dense array to mark the boxes summed in: each caller's box is its own.
+            let sums = firsts
+                .iter()
+                .map(|&first| self.moments_in_box::<N>(moments, first))
+                .collect();
+            return ((0..firsts.len() as u32).collect(), sums);
+        };
         let mut sums = Vec::new();
         let mut box_of = Vec::with_capacity(firsts.len());
-        let mut summed = match &self.lookup {
-            Lookup::Dense { slots, .. } => vec![NONE; slots.len()],
-            Lookup::Sparse(_) => Vec::new(),
-        };
+        let mut summed = vec![NONE; slots.len()];
         for &first in firsts {
-            let at = match &self.lookup {
-                Lookup::Dense { cells, .. } => cells.slot(first),
-                Lookup::Sparse(_) => None,
-            };
+            let at = cells.slot(first);
             let index = match at {
                 Some(at) if summed[at] != NONE => summed[at],
                 _ => {
