@@ -40,8 +40,9 @@ impl CellPlane {
 }
 
 /// The fused points at two scales: the voxels, and voxels twice as large with their planes.
-pub struct TwoScaleGrid<'a> {
-    pub fine: &'a MomentGrid,
+pub struct TwoScaleGrid {
+    /// The fine voxels' size, metres.
+    fine_voxel_m: f32,
     /// The fine voxels' cells in (z, y, x) order.
     fine_cells: Vec<IVec3>,
     /// The coarse voxels in (z, y, x) order with their moments: the fits below read them by
@@ -57,8 +58,8 @@ pub struct TwoScaleGrid<'a> {
 
 const NO_PLANE: u32 = u32::MAX;
 
-impl<'a> TwoScaleGrid<'a> {
-    pub fn new(fine: &'a MomentGrid) -> Self {
+impl TwoScaleGrid {
+    pub fn new(fine: &MomentGrid) -> Self {
         let fine_voxels = fine.sorted_voxels();
         let coarse = SortedVoxels::coarsened(&fine_voxels, 2, fine.voxel_size_m());
         let fine_cells = fine_voxels.iter().map(|&(cell, _)| cell).collect();
@@ -66,7 +67,7 @@ impl<'a> TwoScaleGrid<'a> {
         let (coarse_planes, plane_of_coarse) =
             fit_coarse_planes(&coarse.cells, &coarse.moments, &coarse_index);
         Self {
-            fine,
+            fine_voxel_m: fine.voxel_size_m(),
             fine_cells,
             coarse,
             coarse_index,
@@ -140,7 +141,7 @@ fn fit_coarse_planes(
 /// points in a 4-voxel box form a nearly round blob, and their least-spread direction is
 /// little better than random. Normals are unoriented.
 pub fn fit_cell_planes(grid: &TwoScaleGrid, min_points: f32) -> Vec<CellPlane> {
-    let voxel = grid.fine.voxel_size_m();
+    let voxel = grid.fine_voxel_m;
     let firsts: Vec<IVec3> = grid
         .fine_cells
         .iter()
