@@ -8,7 +8,7 @@
 use glam::{IVec3, Vec3};
 use rustc_hash::FxHashMap;
 
-use crate::cell_index::{floor_div, CellBox};
+use crate::cell_index::{floor_div, CellBox, CellIndex};
 use crate::moments::PointMoments;
 
 /// Sparse voxel grid of point moments.
@@ -206,6 +206,36 @@ impl SortedVoxels {
             }
         }
         coarse
+    }
+
+    /// For each voxel, whether it holds fewer points than `fraction` of the mean count of the
+    /// occupied voxels of its 3 × 3 × 3 neighbourhood (itself included). Under noise as wide
+    /// as a voxel or wider, such a voxel lies beside the surface and holds only a tail of the
+    /// noise: its centroid is a standard deviation or more off the surface, to the outside
+    /// where the surface turns away (a convex edge or rim). With little noise a thin voxel is
+    /// one that clips the surface (an edge, a corner, the end of a thin part), and its centroid
+    /// is as good as any: only a caller that knows the noise dominates should drop them.
+    pub fn thin_voxels(&self, fraction: f64) -> Vec<bool> {
+        let index = CellIndex::new(&self.cells);
+        self.cells
+            .iter()
+            .zip(&self.moments)
+            .map(|(&cell, own)| {
+                let (mut count, mut occupied) = (0.0f64, 0u32);
+                for dz in -1..=1 {
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            if let Some(i) = index.get(cell + IVec3::new(dx, dy, dz)) {
+                                count += self.moments[i as usize].count;
+                                occupied += 1;
+                            }
+                        }
+                    }
+                }
+                // `occupied` counts the voxel itself, so it is at least 1.
+                own.count < fraction * count / f64::from(occupied.max(1))
+            })
+            .collect()
     }
 }
 
@@ -535,6 +565,58 @@ mod tests {
             }
             assert_eq!(coarse.voxel_size_m, 0.03 * factor as f32);
         }
+    }
+
+    /// A 1 m square under noise as wide as a voxel: the two layers of voxels the surface runs
+    /// through are never thin, and nearly all voxels two or more layers off it are. On a
+    /// noiseless square none is.
+    #[test]
+    fn thin_voxels_are_the_noises_tails() {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::{Distribution, Normal};
+        let voxel = 0.05;
+        let square = |sigma: f32| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+            let noise = Normal::new(0.0, sigma.max(1e-9)).unwrap();
+            let points: Vec<Vec3> = (0..100_000)
+                .map(|_| {
+                    let z = if sigma > 0.0 {
+                        noise.sample(&mut rng)
+                    } else {
+                        0.5 * voxel
+                    };
+                    Vec3::new(rng.random::<f32>(), rng.random::<f32>(), z)
+                })
+                .collect();
+            let mut grid = MomentGrid::new(voxel);
+            grid.integrate(&points);
+            SortedVoxels::coarsened(&grid.sorted_voxels(), 1, voxel)
+        };
+        let noisy = square(voxel);
+        let thin = noisy.thin_voxels(0.7);
+        let layer = |want: fn(i32) -> bool| {
+            let flags: Vec<bool> = noisy
+                .cells
+                .iter()
+                .zip(&thin)
+                .filter(|(c, _)| want(c.z))
+                .map(|(_, &t)| t)
+                .collect();
+            (flags.iter().filter(|&&t| t).count(), flags.len())
+        };
+        let (thin_on, on) = layer(|z| z == -1 || z == 0);
+        assert_eq!(
+            thin_on, 0,
+            "{thin_on} of the {on} voxels on the surface are thin"
+        );
+        let (thin_off, off) = layer(|z| !(-2..=1).contains(&z));
+        assert!(
+            off > 100 && thin_off * 10 >= off * 9,
+            "{thin_off} of the {off} voxels off the surface are thin"
+        );
+        let clean = square(0.0);
+        assert_eq!(clean.cells.len(), 400);
+        assert!(clean.thin_voxels(0.7).iter().all(|&t| !t));
     }
 
     #[test]
