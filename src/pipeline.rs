@@ -335,6 +335,10 @@ pub struct MeshReport {
     /// 0 unless [`MeshConfig::measure_fit`].
     pub fit_rms_after: f32,
     pub fit_max_move: f32,
+    /// Voxel centroids the fit left out as tails of the noise ([`NOISE_TAIL_FRACTION`]; 0
+    /// unless [`noise_tails_stand_out`]), of all the voxels it had.
+    pub fit_tail_voxels: usize,
+    pub fit_voxels: usize,
     pub fit_ms: f64,
     /// Connected pieces of the output, those with a boundary (open shells or holes), and
     /// those the orientation check turned outward (see [`orient_outward`]).
@@ -742,10 +746,14 @@ fn simplify_and_fit(
     let fit_start = Instant::now();
     let mut last_pass = None;
     let mut refine_ms = 0.0;
+    let mut fit_tail_voxels = 0;
     let fit = if fit_to_data {
         // Centroids of voxels twice the reconstruction's: a quarter of the samples, each the
         // mean of several points, and still far finer than the simplified triangles.
         let tails = drop_noise_tails.then(|| coarse_grid.thin_voxels(NOISE_TAIL_FRACTION));
+        fit_tail_voxels = tails
+            .as_ref()
+            .map_or(0, |thin| thin.iter().filter(|&&t| t).count());
         let samples: Vec<WeightedSample> = coarse_grid
             .moments
             .iter()
@@ -832,6 +840,12 @@ fn simplify_and_fit(
         fit_rms_before: fit.rms_before_m,
         fit_rms_after: fit.rms_after_m,
         fit_max_move: fit.max_move_m,
+        fit_tail_voxels,
+        fit_voxels: if fit_to_data {
+            coarse_grid.moments.len()
+        } else {
+            0
+        },
         fit_ms,
         ..MeshReport::default()
     };
