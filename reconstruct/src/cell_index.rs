@@ -28,11 +28,11 @@ pub(crate) const FACE_STEPS: [IVec3; 6] = [
 ];
 
 /// The cell of step `step` (a positive number of cells) that holds `cell`:
-/// `cell.div_euclid(step)` per axis. The steps the pipeline uses (1 to 4) are matched to constants, which the compiler
-/// turns into shifts and multiplications: with the step known only at run time,
-/// `IVec3::div_euclid` is three integer divisions. The signed distance divides each plane's
-/// cell by its corner step four times (1.4 % of the one-core pipeline on the cube), and the
-/// coarse grid each fine voxel by two.
+/// `cell.div_euclid(step)` per axis. The steps the pipeline uses (1 to 4) are matched to
+/// constants, which the compiler turns into shifts and multiplications: with the step known
+/// only at run time, `IVec3::div_euclid` is three integer divisions. The signed distance
+/// divides each plane's cell by its corner step four times (1.4 % of the one-core pipeline on
+/// the cube), and the coarse grid each fine voxel's cell by its factor, 2.
 #[inline(always)]
 pub(crate) fn floor_div(cell: IVec3, step: i32) -> IVec3 {
     match step {
