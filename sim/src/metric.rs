@@ -46,6 +46,13 @@ pub struct MeshDistance {
     /// The largest distance seen on either side: the sampled two-sided Hausdorff distance (a
     /// lower bound on the exact one).
     pub hausdorff_m: f64,
+    /// The largest distance from a point on the reference to the candidate: where the
+    /// candidate cut something off (a rounded corner, a lost thin part).
+    pub max_reference_to_candidate_m: f64,
+    /// The largest distance from a point on the candidate to the reference: where the
+    /// candidate reaches out beyond the reference (a spike, a bulge, a phantom), what a
+    /// simulation would touch first and wrongly.
+    pub max_candidate_to_reference_m: f64,
     /// Root mean square over all `2 * samples_per_side` distances.
     pub rms_m: f64,
     pub samples_per_side: usize,
@@ -95,6 +102,8 @@ pub fn mesh_distance(
         hausdorff_m: reference_to_candidate
             .max_m
             .max(candidate_to_reference.max_m),
+        max_reference_to_candidate_m: reference_to_candidate.max_m,
+        max_candidate_to_reference_m: candidate_to_reference.max_m,
         rms_m: ((reference_to_candidate.sum_sq_m2 + candidate_to_reference.sum_sq_m2) / (2.0 * n))
             .sqrt(),
         samples_per_side,
@@ -303,6 +312,37 @@ mod tests {
         assert!((d.mhe_m / 0.010_029_0 - 1.0).abs() < 0.001, "{d:?}");
         assert!(d.hausdorff_m <= 0.01 * 3f64.sqrt() + 1e-6, "{d:?}");
         assert!(d.hausdorff_m > 0.014, "{d:?}");
+        // Every reference point is 0.01 m inside; the candidate's corners stray the farthest.
+        assert!(
+            (d.max_reference_to_candidate_m - 0.01).abs() < 1e-6,
+            "{d:?}"
+        );
+        assert_eq!(d.max_candidate_to_reference_m, d.hausdorff_m, "{d:?}");
+    }
+
+    /// One corner of a cube pulled out along its diagonal to (0.7, 0.7, 0.7), 0.35 m from the
+    /// cube: the spike shows on the candidate's side, not on the reference's, whose corner
+    /// region lies inside the candidate.
+    #[test]
+    fn a_spike_is_the_candidates_farthest_point() {
+        let reference = Shape::Cube.mesh();
+        let mut candidate = reference.clone();
+        let corner = candidate
+            .vertices
+            .iter()
+            .position(|v| v.cmpgt(Vec3::ZERO).all())
+            .expect("the cube has a corner in the positive octant");
+        candidate.vertices[corner] *= 1.4;
+        let d = mesh_distance(&reference, &candidate, PAPER_SAMPLES, 3).expect("valid meshes");
+        let tip = 0.2 * 3f64.sqrt();
+        assert!(
+            d.max_candidate_to_reference_m > 0.2 && d.max_candidate_to_reference_m <= tip + 1e-6,
+            "{d:?}"
+        );
+        assert!(
+            d.max_candidate_to_reference_m > 2.0 * d.max_reference_to_candidate_m,
+            "{d:?}"
+        );
     }
 
     #[test]
