@@ -173,17 +173,25 @@ impl CellIndex {
 
     /// The sum of `moments` over the listed cells of the `N` × `N` × `N` box whose lowest
     /// cell is `first`, added in (z, y, x) order.
-    ///
-    /// A box inside the dense array (any box reaching at most one cell beyond the listed ones)
-    /// is read by stepping through the array from its first cell: looking each cell up with
-    /// its own bounds checks was most of the time the plane fits spent on their 27 and 8
-    /// neighbours (5 % of meshing a 1 m cube on one core).
     pub fn moments_in_box<const N: i32>(
         &self,
         moments: &[PointMoments],
         first: IVec3,
     ) -> PointMoments {
         let mut sum = PointMoments::default();
+        self.for_each_in_box::<N>(first, |slot| sum += &moments[slot as usize]);
+        sum
+    }
+
+    /// Calls `visit` with the list position of each listed cell of the `N` × `N` × `N` box
+    /// whose lowest cell is `first`, in (z, y, x) order.
+    ///
+    /// A box inside the dense array (any box reaching at most one cell beyond the listed ones)
+    /// is read by stepping through the array from its first cell: looking each cell up with
+    /// its own bounds checks was most of the time the plane fits spent on their 27 and 8
+    /// neighbours (5 % of meshing a 1 m cube on one core).
+    #[inline]
+    pub fn for_each_in_box<const N: i32>(&self, first: IVec3, mut visit: impl FnMut(u32)) {
         if let Lookup::Dense { cells, slots } = &self.lookup {
             let inside = cells
                 .slot(first)
@@ -198,24 +206,23 @@ impl CellIndex {
                         let start = base + dz * layer + dy * row;
                         for &slot in &slots[start..start + N as usize] {
                             if slot != NONE {
-                                sum += &moments[slot as usize];
+                                visit(slot);
                             }
                         }
                     }
                 }
-                return sum;
+                return;
             }
         }
         for dz in 0..N {
             for dy in 0..N {
                 for dx in 0..N {
                     if let Some(slot) = self.get(first + IVec3::new(dx, dy, dz)) {
-                        sum += &moments[slot as usize];
+                        visit(slot);
                     }
                 }
             }
         }
-        sum
     }
 
     /// [`Self::moments_in_box`] for every box of `firsts` (their lowest cells), each distinct

@@ -222,16 +222,10 @@ impl SortedVoxels {
             .zip(&self.moments)
             .map(|(&cell, own)| {
                 let (mut count, mut occupied) = (0.0f64, 0u32);
-                for dz in -1..=1 {
-                    for dy in -1..=1 {
-                        for dx in -1..=1 {
-                            if let Some(i) = index.get(cell + IVec3::new(dx, dy, dz)) {
-                                count += self.moments[i as usize].count;
-                                occupied += 1;
-                            }
-                        }
-                    }
-                }
+                index.for_each_in_box::<3>(cell - IVec3::ONE, |i| {
+                    count += self.moments[i as usize].count;
+                    occupied += 1;
+                });
                 // `occupied` counts the voxel itself, so it is at least 1.
                 own.count < fraction * count / f64::from(occupied.max(1))
             })
