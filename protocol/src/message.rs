@@ -551,7 +551,8 @@ pub struct Stats {
     /// From a frame's capture to the publication of a shape or pose it contributed to, ms.
     pub frame_to_publish_p50_ms: f32,
     pub frame_to_publish_p99_ms: f32,
-    /// Per pipeline stage (deproject, segment, integrate, mesh, simplify, publish, …).
+    /// Per pipeline stage (deproject, segment, integrate, mesh wait, mesh, simplify, publish,
+    /// body, …).
     pub stage_latencies: Vec<StageLatency>,
 }
 

@@ -17,6 +17,10 @@ pub enum Stage {
     Deproject,
     Segment,
     Integrate,
+    /// From the capture of the newest frame in a mesh job to the start of its meshing run:
+    /// the frame path before the job was made and the wait for a free mesher. With the mesh,
+    /// simplify and publish stages it makes up how old a new mesh is when it goes out.
+    MeshWait,
     Mesh,
     Simplify,
     Publish,
@@ -25,10 +29,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 7] = [
+    pub const ALL: [Stage; 8] = [
         Stage::Deproject,
         Stage::Segment,
         Stage::Integrate,
+        Stage::MeshWait,
         Stage::Mesh,
         Stage::Simplify,
         Stage::Publish,
@@ -40,6 +45,7 @@ impl Stage {
             Stage::Deproject => "deproject",
             Stage::Segment => "segment",
             Stage::Integrate => "integrate",
+            Stage::MeshWait => "mesh wait",
             Stage::Mesh => "mesh",
             Stage::Simplify => "simplify",
             Stage::Publish => "publish",

@@ -63,6 +63,10 @@ pub fn run_mesher(shared: &Shared, heartbeat: &Heartbeat) {
 fn mesh_one(shared: &Shared, job: MeshJob) {
     let counters = &shared.counters;
     let started = Instant::now();
+    counters.record(
+        Stage::MeshWait,
+        tacmesh_source::monotonic_now().saturating_sub(job.newest_capture),
+    );
     let result = mesh_fused_grid(
         &job.grid,
         Some(job.viewpoint_in_object),
@@ -186,6 +190,38 @@ mod tests {
         assert_eq!((first.object_id, first.newest_capture.as_millis()), (7, 3));
         assert_eq!(queue.take().unwrap().object_id, 3);
         assert!(queue.is_empty());
+    }
+
+    /// The wait before a meshing run is counted from its newest frame's capture, whether the
+    /// run then makes a mesh or (as here, on an empty grid) finds too little data.
+    #[test]
+    fn a_meshing_run_records_its_wait_since_the_capture() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = crate::daemon::tests::shared(dir.path());
+        let waited = std::time::Duration::from_millis(40);
+        let captured = tacmesh_source::monotonic_now().saturating_sub(waited);
+        mesh_one(
+            &shared,
+            MeshJob {
+                newest_capture: captured,
+                ..job(1, 0)
+            },
+        );
+        let snapshot = shared.counters.snapshot(
+            shared.ring.stats(),
+            shared.publisher.counters(),
+            std::time::Duration::from_secs(1),
+        );
+        let (_, p50, p99) = snapshot
+            .stages
+            .iter()
+            .find(|(name, ..)| *name == Stage::MeshWait.name())
+            .copied()
+            .expect("the stage is reported");
+        assert!(p50 >= 40.0 && p99 < 40_000.0, "mesh wait {p50} / {p99} ms");
+        assert_eq!(snapshot.meshing_runs, 1);
+        assert_eq!(snapshot.meshing_failures, 1);
+        shared.publisher.shutdown("test over");
     }
 
     #[test]

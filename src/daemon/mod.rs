@@ -588,7 +588,7 @@ mod tests {
         })
     }
 
-    fn shared(dir: &std::path::Path) -> Shared {
+    pub(super) fn shared(dir: &std::path::Path) -> Shared {
         let config = DaemonConfig::default();
         Shared {
             ring: FrameRing::new(64),
