@@ -21,7 +21,11 @@ pub fn start_daemon(sensor: &str, extra: &[&str]) -> RunningDaemon {
         .args(["run", "--sensor", sensor, "--socket"])
         .arg(&socket)
         .args(extra)
-        .env("RUST_LOG", "info")
+        // The caller's log filter if it set one (a stage's debug lines), else the default.
+        .env(
+            "RUST_LOG",
+            std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+        )
         .stderr(Stdio::inherit())
         .spawn()
         .expect("tacmesh runs");
