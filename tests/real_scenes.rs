@@ -466,9 +466,9 @@ fn room_recordings_publish_objects_not_walls() {
 /// The PCL Kinect grabber frames (three frames of a floor with a laptop and a box, about 1 cm
 /// of camera jitter between them) looped for 60 s at 30 fps: no object in view is removed, and
 /// each object keeps its area within the bound below of its first converged mesh (the one
-/// published 10 s in), with under 5 % of its area farther than 3 cm from the measured points. Before the
-/// weight cap and free-space carving the laptop grew from 0.11 to 0.20–0.27 m² with 27–45 % of
-/// its area off the data.
+/// published 10 s in), with under 5 % of its area farther than 3 cm from the measured points.
+/// Before the weight cap and free-space carving the laptop grew from 0.11 to 0.20–0.27 m² with
+/// 27–45 % of its area off the data.
 ///
 /// The bound is 10 % of the area, or one fused voxel (at the object's range) along its whole
 /// rim where that is more: 4/n of the area for an object n voxels across, the least a rim of
