@@ -147,6 +147,7 @@ def wire_seeds():
         "goodbye": b"\xff" + goodbye,
         "client-subscribe": b"\x03" + subscribe() + subscribe(1, 1, 10.0, 1, (4, 5)),
         "client-subscribe-v1": b"\x03" + frame(0x80),
+        "client-subscribe-tiny-rate": b"\x10" + subscribe(0, 0, 1e-45, 3),
         "oversize-prefix": b"\xff" + struct.pack("<IB", 0x7FFF_FFFF, 0x08),
     }
     return seeds

@@ -84,6 +84,31 @@ fn bad_contact_settings_are_clap_errors() {
     assert!(stderr.contains("--contact"), "{stderr}");
 }
 
+/// Rates and durations that once aborted the subscriber's daemon or `run` itself are refused
+/// by clap with the range they must be in, before anything connects or starts.
+#[test]
+fn absurd_rates_and_durations_are_clap_errors() {
+    for value in ["1e-45", "-1", "inf", "1e6"] {
+        let stderr = stderr_of(&["subscribe", "--max-rate-hz", value, "--count", "1"]);
+        assert!(
+            stderr.contains("invalid value") && stderr.contains("0 (no cap)"),
+            "--max-rate-hz {value}: {stderr}"
+        );
+    }
+    for value in ["inf", "-1", "1e30", "NaN"] {
+        let out = tacmesh(&[
+            "run",
+            "--duration-s",
+            value,
+            "--socket",
+            "/nonexistent/t.sock",
+        ]);
+        assert_eq!(out.status.code(), Some(2), "--duration-s {value}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains("a year"), "--duration-s {value}: {stderr}");
+    }
+}
+
 /// `tacmesh eval … | head -0`: a closed standard output is a clear error and exit 1, not the
 /// panic (exit 101) that `println!` gives on a broken pipe.
 #[test]

@@ -16,7 +16,9 @@
 //!     bound overflows (both only for coordinates near `f32::MAX`);
 //! - a Body whose proxy is compact likewise: in the full encoding it decodes to the same body,
 //!   and compactly to the same body but for its proxy's vertices;
-//! - the decoder never buffers more than one frame beyond what was taken out.
+//! - the decoder never buffers more than one frame beyond what was taken out;
+//! - a decoded Subscribe's rate cap, as the interval the daemon makes of it, fits both
+//!   `Duration` and `Instant` (a rate of 1e-45 Hz once aborted the daemon there).
 
 #![no_main]
 
@@ -50,6 +52,12 @@ fn decode_stream(stream: &[u8], from: Sender, chunk_len: usize) {
                     let frame_len = frame_length(&stream[frame_start..]);
                     let frame = &stream[frame_start..frame_start + PREFIX_BYTES + frame_len];
                     match &message {
+                        Message::Subscribe(options) => {
+                            check_rate_interval(options.max_rate_hz);
+                            let mut encoded = Vec::new();
+                            encode(&message, &mut encoded).expect("a decoded message encodes");
+                            assert_eq!(encoded, frame, "{message:?} does not round-trip");
+                        }
                         Message::Shape(shape) if shape.encoding == Encoding::Compact => {
                             check_compact_shape(shape, from);
                         }
@@ -75,6 +83,20 @@ fn decode_stream(stream: &[u8], from: Sender, chunk_len: usize) {
             decoder.buffered_len()
         );
     }
+}
+
+/// A rate the decoder let through becomes an interval that fits the clocks, as the
+/// publisher's rate cap computes it.
+fn check_rate_interval(rate_hz: f32) {
+    if rate_hz == 0.0 {
+        return;
+    }
+    let interval = std::time::Duration::try_from_secs_f32(1.0 / rate_hz)
+        .unwrap_or_else(|err| panic!("rate {rate_hz}: {err}"));
+    assert!(
+        std::time::Instant::now().checked_add(interval).is_some(),
+        "rate {rate_hz}: an interval of {interval:?} overflows Instant"
+    );
 }
 
 /// The round trips a decoded compact shape must survive (see the top of the file).

@@ -7,9 +7,10 @@ use tacmesh_source::TriMesh;
 
 use crate::encode::{
     check_body_proxy, check_finite, check_flags, check_hull_count, check_hull_size, check_id_count,
-    check_kinds, check_number, check_pose, check_triangle, check_vertex, compact_index_bytes,
-    CompactBox, COMPACT_VERTEX_BYTES, HULL_TRIANGLE_BYTES, ID_BYTES, PREFIX_BYTES, SHAPE_FLAGS,
-    STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND, TRIANGLE_BYTES, VERTEX_BYTES,
+    check_kinds, check_number, check_pose, check_rate, check_triangle, check_vertex,
+    compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, HULL_TRIANGLE_BYTES, ID_BYTES,
+    PREFIX_BYTES, SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND,
+    TRIANGLE_BYTES, VERTEX_BYTES,
 };
 use crate::error::WireError;
 use crate::message::{
@@ -149,7 +150,7 @@ fn read_options(r: &mut Reader<'_>) -> Result<Subscribe, WireError> {
         SUBSCRIBE_RESEND | SUBSCRIBE_EXTRAPOLATE,
     )?;
     let max_rate_hz = r.f32("max_rate_hz")?;
-    check_number("max_rate_hz", max_rate_hz)?;
+    check_rate(max_rate_hz)?;
     let kinds = check_kinds(r.message, r.u8("kinds")?)?;
     let id_count = r.u32("id_count")?;
     check_id_count(r.message, u64::from(id_count))?;

@@ -10,9 +10,9 @@ use tacmesh_source::TriMesh;
 use crate::error::WireError;
 use crate::message::{
     quantisation_bound_m, Body, BodyProxy, Encoding, Hull, Kinds, Message, Pose, Session, Shape,
-    Stats, Subscribe, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES,
-    MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES, SHAPE_CLOSED, SHAPE_NEW_FRAME,
-    SHAPE_SUPPORT,
+    Stats, Subscribe, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES, MAX_RATE_HZ,
+    MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES, MIN_RATE_HZ, SHAPE_CLOSED,
+    SHAPE_NEW_FRAME, SHAPE_SUPPORT,
 };
 
 // ---- layout sizes (docs/protocol.md, "Messages") ----------------------------------------------
@@ -154,8 +154,18 @@ pub(crate) fn check_id_count(message: &'static str, count: u64) -> Result<(), Wi
     }
 }
 
+/// A rate cap is 0 (none) or within [`MIN_RATE_HZ`]..=[`MAX_RATE_HZ`]: a server turns it into
+/// an interval, and the interval of a tiny rate overflows every clock.
+pub(crate) fn check_rate(value: f32) -> Result<(), WireError> {
+    if value == 0.0 || (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&value) {
+        Ok(())
+    } else {
+        Err(WireError::InvalidRate { value })
+    }
+}
+
 fn check_options(options: &Subscribe, message: &'static str) -> Result<(), WireError> {
-    check_number("max_rate_hz", options.max_rate_hz)?;
+    check_rate(options.max_rate_hz)?;
     check_kinds(message, options.kinds.bits())?;
     check_id_count(message, options.object_ids.len() as u64)
 }

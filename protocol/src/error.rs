@@ -1,4 +1,4 @@
-use crate::message::{Sender, MAX_FRAME_BYTES};
+use crate::message::{Sender, MAX_FRAME_BYTES, MAX_RATE_HZ, MIN_RATE_HZ};
 
 /// Everything that can be wrong with a frame, on either side. After any decode error the peer is
 /// not speaking this protocol correctly: drop the connection (see [`crate::FrameDecoder`]). The
@@ -65,6 +65,12 @@ pub enum WireError {
 
     #[error("`{field}` is {value}, but it must be finite and not negative")]
     InvalidNumber { field: &'static str, value: f32 },
+
+    #[error(
+        "`max_rate_hz` is {value}, but it must be 0 (no cap) or from {MIN_RATE_HZ} to \
+         {MAX_RATE_HZ} updates a second"
+    )]
+    InvalidRate { value: f32 },
 
     #[error(
         "`{field}` of {message} is 0x{value:02x}, but only the bits 0x{defined:02x} are defined"

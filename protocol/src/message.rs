@@ -28,6 +28,14 @@ pub const MAX_REASON_BYTES: usize = 1024;
 /// The most object ids a [`Subscribe`] may list.
 pub const MAX_SUBSCRIBE_IDS: usize = 1024;
 
+/// The lowest non-zero [`Subscribe::max_rate_hz`]: one update of an object every 100 s. A
+/// lower rate is refused rather than rounded, since a client that asks for it is broken.
+pub const MIN_RATE_HZ: f32 = 0.01;
+
+/// The highest [`Subscribe::max_rate_hz`]: above it the cap would never hold anything back
+/// (no sensor runs this fast); a client that wants no cap sends 0.
+pub const MAX_RATE_HZ: f32 = 10_000.0;
+
 /// The most convex hulls a [`Body`] may have.
 pub const MAX_HULLS: usize = 16;
 
@@ -271,7 +279,7 @@ pub struct Subscribe {
     /// last Pose to the client is [`EXTRAPOLATION_REFRESH`] old (dead reckoning).
     pub extrapolate: bool,
     /// At most this many Shapes and Poses a second per object (the latest is sent when the
-    /// interval is over); 0 for no cap. Finite and not negative.
+    /// interval is over); 0 for no cap, else from [`MIN_RATE_HZ`] to [`MAX_RATE_HZ`].
     pub max_rate_hz: f32,
     /// Which kinds of object to send.
     pub kinds: Kinds,

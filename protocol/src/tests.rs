@@ -1384,7 +1384,6 @@ fn wire_rejects_invalid_residual_rate_and_latency() {
         let bytes = value.to_le_bytes();
         for (frame, offset, from, field) in [
             (&shape, at::RESIDUAL, Sender::Server, "max_residual_m"),
-            (&subscribe, at::RATE, Sender::Client, "max_rate_hz"),
             (
                 &stats,
                 at::FRAME_TO_PUBLISH_P99,
@@ -1404,6 +1403,104 @@ fn wire_rejects_invalid_residual_rate_and_latency() {
     // Zero is fine: no rate cap, an exact mesh, a stage with no samples.
     assert!(decode_one(&patched(&subscribe, at::RATE, &[0; 4]), Sender::Client).is_ok());
     assert!(decode_one(&patched(&shape, at::RESIDUAL, &[0; 4]), Sender::Server).is_ok());
+}
+
+/// A property over many Subscribe payloads, every field random (xorshift, fixed seed): each
+/// decodes to options whose rate cap, as the interval a server makes of it, fits `Duration`
+/// and `Instant`, or is refused with an error; and what decodes encodes to the same bytes.
+#[test]
+fn every_subscribe_that_decodes_has_a_rate_interval_the_clocks_hold() {
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let (mut decoded, mut refused) = (0, 0);
+    for round in 0..200_000u32 {
+        let bits = next();
+        // Half of the rates are any f32 bits, half near the edges of the range.
+        let rate = if round % 2 == 0 {
+            f32::from_bits(bits as u32)
+        } else {
+            let edges = [0.0, MIN_RATE_HZ, MAX_RATE_HZ, 1e-45, f32::MIN_POSITIVE];
+            let edge = edges[(bits >> 40) as usize % edges.len()];
+            f32::from_bits(
+                edge.to_bits()
+                    .wrapping_add((bits >> 32) as u32 % 5)
+                    .wrapping_sub(2),
+            )
+        };
+        let mut payload = vec![(bits >> 8) as u8 & 1, (bits >> 16) as u8 & 3];
+        payload.extend_from_slice(&rate.to_le_bytes());
+        payload.push((bits >> 24) as u8 & 7);
+        payload.extend_from_slice(&0u32.to_le_bytes());
+        let mut frame = ((payload.len() + 1) as u32).to_le_bytes().to_vec();
+        frame.push(0x81);
+        frame.extend_from_slice(&payload);
+        let mut decoder = FrameDecoder::new(Sender::Client);
+        decoder.push(&frame);
+        match decoder.next_message() {
+            Ok(Some(Message::Subscribe(options))) => {
+                decoded += 1;
+                if options.max_rate_hz != 0.0 {
+                    let interval =
+                        std::time::Duration::try_from_secs_f32(1.0 / options.max_rate_hz)
+                            .expect("the interval fits a Duration");
+                    assert!(std::time::Instant::now().checked_add(interval).is_some());
+                }
+                let mut again = Vec::new();
+                encode(&Message::Subscribe(options), &mut again).expect("encodes again");
+                assert_eq!(again, frame);
+            }
+            Ok(other) => panic!("{other:?}"),
+            Err(_) => refused += 1,
+        }
+    }
+    assert!(
+        decoded > 1_000 && refused > 1_000,
+        "{decoded} decoded, {refused} refused"
+    );
+}
+
+/// A rate the server would turn into an interval no clock can hold (1e-45 Hz once aborted the
+/// daemon in `Duration::from_secs_f32`), or one that is no cap at all, is refused on both sides.
+#[test]
+fn wire_rejects_rates_outside_the_documented_range() {
+    let subscribe = encoded(&Message::Subscribe(sample_subscribe()));
+    for value in [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -1.0,
+        -f32::MIN_POSITIVE,
+        1e-45,
+        f32::MIN_POSITIVE,
+        1.1e-19,
+        MIN_RATE_HZ * 0.99,
+        MAX_RATE_HZ * 1.01,
+        f32::MAX,
+    ] {
+        let frame = patched(&subscribe, at::RATE, &value.to_le_bytes());
+        let err = decode_err(&frame, Sender::Client);
+        assert!(
+            matches!(err, WireError::InvalidRate { value: v } if v.to_bits() == value.to_bits()),
+            "{value}: {err:?}"
+        );
+        assert!(err.to_string().contains("0 (no cap)"), "{err}");
+        let mut options = sample_subscribe();
+        options.max_rate_hz = value;
+        let mut out = Vec::new();
+        assert!(
+            encode(&Message::Subscribe(options), &mut out).is_err(),
+            "{value} was encoded"
+        );
+    }
+    for value in [0.0, MIN_RATE_HZ, 1.0, 30.0, MAX_RATE_HZ] {
+        let frame = patched(&subscribe, at::RATE, &value.to_le_bytes());
+        assert!(decode_one(&frame, Sender::Client).is_ok(), "{value}");
+    }
 }
 
 #[test]
@@ -1562,10 +1659,7 @@ fn encode_refuses_what_decode_would_refuse_and_leaves_out_untouched() {
         ),
         (
             subscribe(&|s| s.max_rate_hz = -1.0),
-            WireError::InvalidNumber {
-                field: "max_rate_hz",
-                value: -1.0,
-            },
+            WireError::InvalidRate { value: -1.0 },
         ),
         (
             subscribe(&|s| s.kinds = Kinds(0)),

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use tacmesh_protocol::{
     encode, FrameDecoder, Kinds, Message, Pose, Sender, Session, Subscribe, FIRST_SUPPORT_ID,
+    MAX_REASON_BYTES,
 };
 
 use tacmesh_source::{monotonic_now, realtime_now_ns};
@@ -394,11 +395,15 @@ fn take_due(pending: &mut Pending, written: &Written, now: Instant) -> (Updates,
     if pending.updates.snapshot || rate <= 0.0 {
         return (std::mem::take(&mut pending.updates), None);
     }
-    let interval = Duration::from_secs_f32(1.0 / rate);
+    // The decoder holds a rate to MIN_RATE_HZ..=MAX_RATE_HZ, so these cannot fail; a rate
+    // that got past it anyway is taken as no cap rather than as a panic.
+    let Ok(interval) = Duration::try_from_secs_f32(1.0 / rate) else {
+        return (std::mem::take(&mut pending.updates), None);
+    };
     let mut next_due: Option<Instant> = None;
     let mut due = BTreeMap::new();
     pending.updates.objects.retain(|&id, frames| {
-        match last_sent.get(&id).map(|&at| at + interval) {
+        match last_sent.get(&id).and_then(|&at| at.checked_add(interval)) {
             Some(at) if at > now => {
                 next_due = Some(next_due.map_or(at, |n| n.min(at)));
                 true
@@ -693,23 +698,47 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
                 }
                 Ok(Some(other)) => {
                     // The decoder refuses server kinds already; this is for kinds added later.
-                    return Some(Retire::Dropped(format!(
-                        "it sent {}, which a subscriber may not send",
-                        other.name()
-                    )));
+                    let why = format!("it sent {}, which a subscriber may not send", other.name());
+                    dismiss_with_goodbye(shared, client, &why);
+                    return None;
                 }
                 Ok(None) => break,
                 Err(error) => {
-                    return Some(Retire::Dropped(format!("it sent a bad frame: {error}")))
+                    dismiss_with_goodbye(shared, client, &format!("it sent a bad frame: {error}"));
+                    return None;
                 }
             }
         }
         if decoder.buffered_len() > CLIENT_BUFFER_CAP {
-            return Some(Retire::Dropped(format!(
+            let why = format!(
                 "it sent {} bytes without completing a frame; subscriber frames are a few bytes",
                 decoder.buffered_len()
-            )));
+            );
+            dismiss_with_goodbye(shared, client, &why);
+            return None;
         }
+    }
+}
+
+/// A subscriber broke the protocol: it is counted as dropped, the log says why, and so does the
+/// Goodbye its writer sends before closing (what was queued for it is discarded), so that a
+/// client with a bug learns what it did. Everyone else is served as before.
+fn dismiss_with_goodbye(shared: &Shared, client: &Client, why: &str) {
+    shared.clients_dropped.fetch_add(1, Ordering::Relaxed);
+    tracing::warn!(client = client.id, "dropping subscriber: {why}");
+    let mut reason = format!("dropped: {why}");
+    if reason.len() > MAX_REASON_BYTES {
+        let mut end = MAX_REASON_BYTES;
+        while !reason.is_char_boundary(end) {
+            end -= 1;
+        }
+        reason.truncate(end);
+    }
+    let mut frame = Vec::new();
+    if encode(&Message::Goodbye { reason }, &mut frame).is_ok() {
+        client.dismiss(frame);
+    } else {
+        client.close();
     }
 }
 

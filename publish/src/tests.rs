@@ -290,6 +290,12 @@ fn garbage_client_is_dropped_while_another_keeps_receiving() {
     wait_until("the garbage client dropped", || {
         publisher.counters().clients_dropped == 1
     });
+    match bad.next() {
+        Some(Message::Goodbye { reason }) => {
+            assert!(reason.contains("unknown message kind 0x7f"), "{reason}")
+        }
+        other => panic!("expected a Goodbye saying why, got {other:?}"),
+    }
     assert_eq!(bad.next(), None, "the bad client's connection is closed");
     assert_eq!(publisher.counters().clients_connected, 1);
 
@@ -929,6 +935,41 @@ fn a_version_1_subscribe_gets_a_goodbye_naming_the_version_spoken() {
     });
     publisher.shape(shape(1, 1, 3)).unwrap();
     assert_eq!(other.shape().object_id(), 1);
+}
+
+/// A Subscribe whose rate no clock can hold (1e-45 Hz once aborted the daemon: its interval
+/// overflowed `Duration`) drops its sender with a Goodbye that names the field; the publisher
+/// serves the others on, and the same again after it.
+#[test]
+fn a_subscribe_with_an_absurd_rate_gets_a_goodbye_and_the_others_are_served() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, publisher, mut other) = serving_one_client(&dir);
+    publisher.shape(shape(1, 1, 3)).unwrap();
+    assert_eq!(other.shape().object_id(), 1);
+    for (round, rate) in [1e-45f32, 1.1e-19, f32::NAN, -1.0].into_iter().enumerate() {
+        let mut bad = TestClient::connect(&path);
+        bad.hello();
+        bad.snapshot();
+        // Subscribe { full, no flags, `rate`, objects and supports, no ids }, as raw bytes:
+        // the encoder refuses to write it.
+        let mut frame = vec![12, 0, 0, 0, 0x81, 0, 0];
+        frame.extend_from_slice(&rate.to_le_bytes());
+        frame.extend_from_slice(&[3, 0, 0, 0, 0]);
+        bad.stream.write_all(&frame).unwrap();
+        let mut reason = None;
+        while let Some(message) = bad.next() {
+            if let Message::Goodbye { reason: why } = message {
+                reason = Some(why);
+            }
+        }
+        let reason = reason.expect("a Goodbye before the end");
+        assert!(reason.contains("max_rate_hz"), "{reason}");
+        wait_until("the client counted as dropped", || {
+            publisher.counters().clients_dropped == round as u64 + 1
+        });
+        publisher.shape(shape(1, round as u64 + 2, 3)).unwrap();
+        assert_eq!(other.shape().version(), round as u64 + 2);
+    }
 }
 
 /// A client that extrapolates poses by their velocity is sent a Pose only when its

@@ -23,6 +23,8 @@ import numpy.typing as npt
 from .wire import (
     DEFAULT_OPTIONS,
     FIRST_SUPPORT_ID,
+    MAX_RATE_HZ,
+    MIN_RATE_HZ,
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
     Body,
@@ -335,8 +337,11 @@ def options_of(
         raise ValueError(
             "kinds: ask for 'objects', 'supports' or both ('bodies' comes only with them)"
         )
-    if not (max_rate_hz >= 0.0 and np.isfinite(max_rate_hz)):
-        raise ValueError(f"max_rate_hz {max_rate_hz}: it is finite and >= 0 (0 for no cap)")
+    if not (max_rate_hz == 0.0 or MIN_RATE_HZ <= max_rate_hz <= MAX_RATE_HZ):
+        raise ValueError(
+            f"max_rate_hz {max_rate_hz}: it is 0 (no cap) or from {MIN_RATE_HZ} to "
+            f"{MAX_RATE_HZ} updates a second"
+        )
     return Subscribe(
         encoding=Encoding(encoding),
         resend=resend,

@@ -39,6 +39,9 @@ MAX_NAME_BYTES = 64
 MAX_REASON_BYTES = 1024
 #: The most object ids a Subscribe may list.
 MAX_SUBSCRIBE_IDS = 1024
+#: The lowest non-zero ``max_rate_hz`` (one update every 100 s) and the highest.
+MIN_RATE_HZ = 0.01
+MAX_RATE_HZ = 10_000.0
 #: How far from 1 a rotation quaternion's norm may be.
 UNIT_QUATERNION_TOLERANCE = 1e-3
 #: The steps of a compact encoding's quantisation, per axis.
@@ -764,6 +767,15 @@ def _check_number(what: str, name: str, value: float) -> None:
         )
 
 
+def _check_rate(what: str, value: float) -> None:
+    # The bounds as the f32s the daemon compares with (a NaN fails both comparisons).
+    if not (value == 0.0 or _f32(MIN_RATE_HZ) <= value <= _f32(MAX_RATE_HZ)):
+        raise InvalidNumber(
+            f"`max_rate_hz` of {what} is {value}, but it must be 0 (no cap) or from "
+            f"{MIN_RATE_HZ} to {MAX_RATE_HZ} updates a second"
+        )
+
+
 def _check_finite(what: str, name: str, values: tuple[float, ...]) -> None:
     for value in values:
         if not math.isfinite(value):
@@ -834,6 +846,7 @@ def _read_options(r: _Reader) -> Subscribe:
             f"`flags` of {r.what} is 0x{flags:02x}, but only the bits 0x{defined:02x} are defined"
         )
     max_rate_hz = r.number("max_rate_hz")
+    _check_rate(r.what, max_rate_hz)
     kinds = r.u8("kinds")
     _check_kinds(r.what, kinds)
     n = r.u32("id_count")
@@ -1228,7 +1241,7 @@ def _text(value: str, what: str, name: str, cap: int, validate: bool) -> bytes:
 
 def _options_payload(options: Subscribe, what: str, validate: bool) -> bytes:
     if validate:
-        _check_number(what, "max_rate_hz", options.max_rate_hz)
+        _check_rate(what, options.max_rate_hz)
         if len(options.object_ids) > MAX_SUBSCRIBE_IDS:
             raise CountOverCap(
                 f"{what} lists {len(options.object_ids)} object ids, more than the cap of "

@@ -401,5 +401,7 @@ def test_options_are_checked() -> None:
         Subscriber("/nonexistent", kinds="hulls")
     assert Subscriber("/nonexistent").options == DEFAULT_OPTIONS
     assert Subscriber("/nonexistent", kinds=("supports", "bodies")).options.kinds == 6
-    with pytest.raises(ValueError, match="max_rate_hz"):
-        Subscriber("/nonexistent", max_rate_hz=-1)
+    for rate in (-1.0, 1e-45, 0.001, 1e5, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="max_rate_hz"):
+            Subscriber("/nonexistent", max_rate_hz=rate)
+    assert Subscriber("/nonexistent", max_rate_hz=0.01).options.max_rate_hz == 0.01

@@ -992,6 +992,10 @@ CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("bodies alone", unchecked(Subscribe(kinds=Kinds.BODIES)), InvalidFlags),
     ("a kind not defined", patched(encode(DEFAULT_OPTIONS), 11, b"\x0b"), InvalidFlags),
     ("a NaN rate", unchecked(Subscribe(max_rate_hz=NAN)), InvalidNumber),
+    # A rate whose interval overflows the daemon's clock once aborted it.
+    ("a rate of 1e-45 Hz", unchecked(Subscribe(max_rate_hz=1e-45)), InvalidNumber),
+    ("a rate below 0.01 Hz", unchecked(Subscribe(max_rate_hz=0.0099)), InvalidNumber),
+    ("a rate above 10 kHz", unchecked(Subscribe(max_rate_hz=10_001.0)), InvalidNumber),
 ]
 
 
@@ -1046,6 +1050,8 @@ def test_last_seen_may_equal_the_pose_time() -> None:
         ),
         (Subscribe(object_ids=tuple(range(1025))), CountOverCap),
         (Subscribe(max_rate_hz=-1.0), InvalidNumber),
+        (Subscribe(max_rate_hz=1e-45), InvalidNumber),
+        (Subscribe(max_rate_hz=1e30), InvalidNumber),
         (Subscribe(kinds=Kinds(0)), InvalidFlags),
         (Subscribe(kinds=Kinds.BODIES), InvalidFlags),
         (replace(DOC_BODY, volume_m3=0.0), BadBody),

@@ -206,10 +206,13 @@ pub enum DepthCameraError {
     #[error("max_range_m must be a finite number of metres > 0, got {max_range_m}")]
     InvalidRange { max_range_m: f32 },
 
-    #[error("fps must be a finite number of frames per second of scene time > 0, got {fps}")]
+    #[error("the image is {width}x{height}: the simulated camera renders at most {MAX_SIDE_PIXELS} pixels a side and {MAX_IMAGE_PIXELS} pixels in all (4096x4096)")]
+    ImageTooLarge { width: u32, height: u32 },
+
+    #[error("fps must be from {MIN_FPS} to {MAX_FPS} frames per second of scene time, got {fps}")]
     InvalidFps { fps: f32 },
 
-    #[error("rate_fps must be a finite number of frames per second > 0 (or none to run as fast as consumed), got {rate_fps}")]
+    #[error("rate_fps must be from {MIN_FPS} to {MAX_FPS} frames per second (or none to run as fast as consumed), got {rate_fps}")]
     InvalidRate { rate_fps: f32 },
 
     #[error("world_from_sensor must be finite and invertible, got {world_from_sensor:?}")]
@@ -670,7 +673,8 @@ impl SimulatedDepthCamera {
         let Some(rate_fps) = self.config.rate_fps else {
             return;
         };
-        let period = Duration::from_secs_f64(1.0 / f64::from(rate_fps));
+        // `check_config` holds the rate to MIN_FPS..=MAX_FPS, so the period fits.
+        let period = Duration::try_from_secs_f64(1.0 / f64::from(rate_fps)).unwrap_or_default();
         let now = Instant::now();
         let due = self.next_due.unwrap_or(now);
         if due > now {
@@ -739,9 +743,10 @@ impl DepthSource for SimulatedDepthCamera {
             }
             FaultKind::Stall => {
                 let left = fault.frames().end - frame_index;
-                thread::sleep(Duration::from_secs_f64(
-                    left as f64 / f64::from(self.config.fps),
-                ));
+                thread::sleep(
+                    Duration::try_from_secs_f64(left as f64 / f64::from(self.config.fps))
+                        .unwrap_or_default(),
+                );
                 // The frames of the window are lost; the schedule starts again from now.
                 frame_index = fault.frames().end;
                 self.frame_index = frame_index + 1;
@@ -752,6 +757,16 @@ impl DepthSource for SimulatedDepthCamera {
         Ok(Observation::Depth(frame))
     }
 }
+
+/// The slowest simulated frame rate: a frame every 100 s.
+pub const MIN_FPS: f32 = 0.01;
+/// The fastest simulated frame rate.
+pub const MAX_FPS: f32 = 1_000.0;
+/// The widest or tallest simulated image, pixels.
+pub const MAX_SIDE_PIXELS: u32 = 16_384;
+/// The most pixels in a simulated image: 4096×4096 (a 100000×100000 camera once took 3 GB
+/// before rendering anything).
+pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
 
 pub(crate) fn check_config(config: &DepthCameraConfig) -> Result<(), DepthCameraError> {
     let k = config.intrinsics;
@@ -769,11 +784,19 @@ pub(crate) fn check_config(config: &DepthCameraConfig) -> Result<(), DepthCamera
             max_range_m: config.max_range_m,
         });
     }
-    if !(config.fps.is_finite() && config.fps > 0.0) {
+    let pixels = u64::from(k.width) * u64::from(k.height);
+    if k.width > MAX_SIDE_PIXELS || k.height > MAX_SIDE_PIXELS || pixels > MAX_IMAGE_PIXELS {
+        return Err(DepthCameraError::ImageTooLarge {
+            width: k.width,
+            height: k.height,
+        });
+    }
+    // A frame period is 1/fps: a tiny rate overflows `Duration` (fps = 1e-30 once aborted).
+    if !(MIN_FPS..=MAX_FPS).contains(&config.fps) {
         return Err(DepthCameraError::InvalidFps { fps: config.fps });
     }
     if let Some(rate_fps) = config.rate_fps {
-        if !(rate_fps.is_finite() && rate_fps > 0.0) {
+        if !(MIN_FPS..=MAX_FPS).contains(&rate_fps) {
             return Err(DepthCameraError::InvalidRate { rate_fps });
         }
     }

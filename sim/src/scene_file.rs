@@ -886,6 +886,17 @@ mod tests {
         );
         let bad_fps = error("[camera]\nfps = 0\n");
         assert!(bad_fps.contains("fps"), "{bad_fps}");
+        // A rate whose frame period overflows `Duration` (it once aborted the daemon), and a
+        // camera whose image would take gigabytes, are refused with the range.
+        for fps in ["1e-30", "1e30", "inf", "nan"] {
+            let paced = error(&format!("[camera]\nfps = {fps}\n"));
+            assert!(paced.contains("fps must be from"), "{fps}: {paced}");
+        }
+        let huge = error("[camera]\nwidth = 100000\nheight = 100000\n");
+        assert!(huge.contains("100000x100000"), "{huge}");
+        assert!(huge.contains("4096x4096"), "{huge}");
+        let tall = error("[camera]\nwidth = 1\nheight = 20000\n");
+        assert!(tall.contains("a side"), "{tall}");
         let bad_loop = error("loop_s = -1\n");
         assert!(bad_loop.contains("loop_s"), "{bad_loop}");
     }

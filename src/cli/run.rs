@@ -62,9 +62,19 @@ pub struct RunArgs {
     /// instead of at the recorded (or simulated) rate. Live devices keep their own rate
     #[arg(long)]
     unpaced: bool,
-    /// Stop after this many seconds (for benchmarks and scripted runs)
-    #[arg(long, value_name = "S")]
+    /// Stop after this many seconds (for benchmarks and scripted runs): 0 to 31536000 (a year)
+    #[arg(long, value_name = "S", value_parser = parse_duration_s, allow_hyphen_values = true)]
     duration_s: Option<f64>,
+}
+
+/// The longest `--duration-s`: a year.
+const MAX_DURATION_S: f64 = 365.0 * 24.0 * 3600.0;
+
+fn parse_duration_s(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(seconds) if (0.0..=MAX_DURATION_S).contains(&seconds) => Ok(seconds),
+        _ => Err(format!("give seconds from 0 to {MAX_DURATION_S} (a year)")),
+    }
 }
 
 pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
@@ -101,7 +111,7 @@ pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
         .context("cannot install the SIGINT/SIGTERM handler")?;
     if let Some(seconds) = args.duration_s {
         let timer_stop = stop.clone();
-        let duration = std::time::Duration::from_secs_f64(seconds.max(0.0));
+        let duration = std::time::Duration::try_from_secs_f64(seconds).unwrap_or_default();
         std::thread::Builder::new()
             .name("duration".into())
             .spawn(move || {
@@ -120,4 +130,22 @@ pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
     ));
     daemon.run_until_stopped(&stop);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--duration-s inf` once aborted in `Duration::from_secs_f64`; it and every other
+    /// number outside 0 s to a year is refused by the parser, saying the range.
+    #[test]
+    fn duration_s_is_checked_where_it_is_parsed() {
+        for good in ["0", "2.5", "31536000"] {
+            assert!(parse_duration_s(good).is_ok(), "{good}");
+        }
+        for bad in ["inf", "-1", "NaN", "1e30", "31536001", "soon"] {
+            let err = parse_duration_s(bad).expect_err(bad);
+            assert!(err.contains("a year"), "{bad}: {err}");
+        }
+    }
 }

@@ -55,8 +55,8 @@ pub struct SubscribeArgs {
     #[arg(long)]
     compact: bool,
     /// At most this many updates a second per object (the latest is sent when the interval is
-    /// over)
-    #[arg(long, value_name = "HZ")]
+    /// over): 0 for no cap, else 0.01 to 10000
+    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz, allow_hyphen_values = true)]
     max_rate_hz: Option<f32>,
     /// Ask for a Pose only when extrapolating the last one by its velocity would be off by more
     /// than 2 mm or 1° (or once a second): fewer poses for a client that extrapolates; the
@@ -183,17 +183,23 @@ pub fn run(args: SubscribeArgs) -> anyhow::Result<()> {
     }
 }
 
+/// `--max-rate-hz`: the range the protocol allows (docs/protocol.md, Subscribe), checked here
+/// so that the daemon never has to drop this client for it.
+fn parse_rate_hz(text: &str) -> Result<f32, String> {
+    use tacmesh::protocol::{MAX_RATE_HZ, MIN_RATE_HZ};
+    match text.trim().parse::<f32>() {
+        Ok(rate) if rate == 0.0 || (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate) => Ok(rate),
+        _ => Err(format!(
+            "give 0 (no cap) or a rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} updates a second"
+        )),
+    }
+}
+
 fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
-    }
-    if let Some(rate) = args.max_rate_hz {
-        anyhow::ensure!(
-            rate.is_finite() && rate >= 0.0,
-            "--max-rate-hz {rate}: give a rate in Hz, 0 or more"
-        );
     }
     anyhow::ensure!(
         args.ids.len() <= tacmesh::protocol::MAX_SUBSCRIBE_IDS,
@@ -656,6 +662,28 @@ mod tests {
         assert_eq!(no_bodies.kinds, Kinds::OBJECTS.with(Kinds::SUPPORTS));
         let supports = parse(&["--only", "supports"]).options().expect("options");
         assert_eq!(supports.kinds, Kinds::SUPPORTS);
+    }
+
+    /// `--max-rate-hz` takes the protocol's range, negative numbers included (clap once took
+    /// `-1` for an unknown option), and says what it takes otherwise.
+    #[test]
+    fn max_rate_hz_is_checked_against_the_protocol_range() {
+        use clap::Parser;
+        #[derive(clap::Parser, Debug)]
+        struct Cli {
+            #[command(flatten)]
+            args: SubscribeArgs,
+        }
+        for good in ["0", "0.01", "30", "10000"] {
+            let cli = Cli::try_parse_from(["subscribe", "--max-rate-hz", good]);
+            assert!(cli.is_ok(), "{good}: {cli:?}");
+        }
+        for bad in ["1e-45", "-1", "0.001", "1e5", "inf", "NaN", "ten"] {
+            let err = Cli::try_parse_from(["subscribe", "--max-rate-hz", bad])
+                .expect_err(bad)
+                .to_string();
+            assert!(err.contains("0 (no cap)"), "{bad}: {err}");
+        }
     }
 
     /// A reader that has the mesh file open while it is replaced still reads the whole old

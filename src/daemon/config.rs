@@ -343,6 +343,125 @@ impl Default for LogSection {
     }
 }
 
+/// The documented range of a number in the config, both ends included; `expected` says it
+/// with its unit for the error.
+pub struct Bounds {
+    pub min: f32,
+    pub max: f32,
+    pub expected: &'static str,
+}
+
+impl Bounds {
+    /// `seconds` as a duration, held within the bounds first (a validated config is within
+    /// them already; this cannot panic whatever it is given, NaN going to the minimum).
+    fn duration(&self, seconds: f32) -> Duration {
+        let held = if seconds.is_nan() {
+            self.min
+        } else {
+            seconds.clamp(self.min, self.max)
+        };
+        Duration::try_from_secs_f32(held).unwrap_or(Duration::ZERO)
+    }
+
+    fn check(&self, key: &'static str, value: f32) -> Result<(), ConfigError> {
+        if (self.min..=self.max).contains(&value) {
+            Ok(())
+        } else {
+            Err(ConfigError::OutOfRange {
+                key,
+                value: value.to_string(),
+                expected: self.expected,
+            })
+        }
+    }
+}
+
+/// `pipeline.max_range_m`: from 10 cm to 100 m.
+pub const MAX_RANGE_M: Bounds = Bounds {
+    min: 0.1,
+    max: 100.0,
+    expected: "from 0.1 to 100 metres",
+};
+/// `workspace.max_object_size_m`: from 1 cm to 100 m.
+pub const MAX_OBJECT_SIZE_M: Bounds = Bounds {
+    min: 0.01,
+    max: 100.0,
+    expected: "from 0.01 to 100 metres",
+};
+/// `track.voxel_size_m`: from 0.5 mm (finer than any depth camera resolves) to 50 cm.
+pub const VOXEL_SIZE_M: Bounds = Bounds {
+    min: 0.0005,
+    max: 0.5,
+    expected: "from 0.0005 to 0.5 metres",
+};
+/// `track.leave_after_s`: from 10 ms to a day.
+pub const LEAVE_AFTER_S: Bounds = Bounds {
+    min: 0.01,
+    max: 86_400.0,
+    expected: "from 0.01 to 86400 seconds",
+};
+/// `track.remesh_interval_s`: from 1 ms to an hour.
+pub const REMESH_INTERVAL_S: Bounds = Bounds {
+    min: 0.001,
+    max: 3_600.0,
+    expected: "from 0.001 to 3600 seconds",
+};
+/// `mesh.max_residual_m`: from 10 µm to 1 m.
+pub const MAX_RESIDUAL_M: Bounds = Bounds {
+    min: 0.00001,
+    max: 1.0,
+    expected: "from 0.00001 to 1 metre",
+};
+/// `stats.publish_interval_s`: from 10 ms to an hour.
+pub const PUBLISH_INTERVAL_S: Bounds = Bounds {
+    min: 0.01,
+    max: 3_600.0,
+    expected: "from 0.01 to 3600 seconds",
+};
+/// `stats.log_interval_s`: from 100 ms to a day.
+pub const LOG_INTERVAL_S: Bounds = Bounds {
+    min: 0.1,
+    max: 86_400.0,
+    expected: "from 0.1 to 86400 seconds",
+};
+
+/// `err`, about `key`, as a parse error of the file at the key's line (where it is in the
+/// text: a default out of range has none).
+fn at_line_of(text: &str, path: &Path, key: &str, err: ConfigError) -> ConfigError {
+    match line_of_key(text, key) {
+        Some(line) => ConfigError::Parse {
+            path: path.to_owned(),
+            message: format!("line {line}: {err}"),
+        },
+        None => err,
+    }
+}
+
+/// The line (from 1) on which dotted `key` (`track.leave_after_s`; in an array of tables,
+/// its first) is given in `text`.
+fn line_of_key(text: &str, key: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    fn span_of(table: &DeTable<'_>, path: &[&str]) -> Option<std::ops::Range<usize>> {
+        let (name, rest) = path.split_first()?;
+        let (key, value) = table.iter().find(|(key, _)| &**key.get_ref() == *name)?;
+        if rest.is_empty() {
+            return Some(key.span());
+        }
+        match value.get_ref() {
+            DeValue::Table(inner) => span_of(inner, rest),
+            DeValue::Array(items) => items.iter().find_map(|item| match item.get_ref() {
+                DeValue::Table(inner) => span_of(inner, rest),
+                _ => None,
+            }),
+            _ => None,
+        }
+    }
+    let document = DeTable::parse(text).ok()?;
+    let path: Vec<&str> = key.split('.').collect();
+    let span = span_of(document.get_ref(), &path)?;
+    Some(text[..span.start.min(text.len())].matches('\n').count() + 1)
+}
+
 /// A configuration that cannot be used; the daemon stops before it starts anything.
 /// Each message states its cause itself; the cause is a field named `cause`, not `source`, so
 /// that a printer of error chains (anyhow's `{:#}`) does not print it a second time.
@@ -390,28 +509,65 @@ impl DaemonConfig {
         Self::parse(&text, path)
     }
 
-    /// Parses and checks config text; `path` names it in errors.
+    /// Parses and checks config text; `path` names it in errors, and a value out of range is
+    /// named with its line.
     pub fn parse(text: &str, path: &Path) -> Result<DaemonConfig, ConfigError> {
         let config: DaemonConfig = toml::from_str(text).map_err(|err| ConfigError::Parse {
             path: path.to_owned(),
             message: describe_toml_error(text, &err),
         })?;
-        config.validate()?;
+        config.validate().map_err(|err| match err {
+            ConfigError::OutOfRange { key, .. } => at_line_of(text, path, key, err),
+            ConfigError::WorldWritable { .. } => at_line_of(text, path, "socket.mode", err),
+            other => other,
+        })?;
         Ok(config)
     }
 
-    /// Checks every value's range, so that a bad config fails at start and not mid-run.
+    /// Checks every value's range, so that a bad config fails at start and not mid-run. Each
+    /// duration, rate and size has a documented minimum and maximum (tacmesh.example.toml):
+    /// a number that is finite and positive can still overflow the clock it becomes
+    /// (`leave_after_s = 1e30`) or the memory it sizes (`voxel_size_m = 1e-30`).
     pub fn validate(&self) -> Result<(), ConfigError> {
-        fn positive(key: &'static str, value: f32) -> Result<(), ConfigError> {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(ConfigError::OutOfRange {
-                    key,
-                    value: value.to_string(),
-                    expected: "a finite number above 0",
-                })
-            }
+        for (key, value, range) in [
+            (
+                "pipeline.max_range_m",
+                self.pipeline.max_range_m,
+                &MAX_RANGE_M,
+            ),
+            (
+                "workspace.max_object_size_m",
+                self.workspace.max_object_size_m,
+                &MAX_OBJECT_SIZE_M,
+            ),
+            ("track.voxel_size_m", self.track.voxel_size_m, &VOXEL_SIZE_M),
+            (
+                "track.leave_after_s",
+                self.track.leave_after_s,
+                &LEAVE_AFTER_S,
+            ),
+            (
+                "track.remesh_interval_s",
+                self.track.remesh_interval_s,
+                &REMESH_INTERVAL_S,
+            ),
+            (
+                "mesh.max_residual_m",
+                self.mesh.max_residual_m,
+                &MAX_RESIDUAL_M,
+            ),
+            (
+                "stats.publish_interval_s",
+                self.stats.publish_interval_s,
+                &PUBLISH_INTERVAL_S,
+            ),
+            (
+                "stats.log_interval_s",
+                self.stats.log_interval_s,
+                &LOG_INTERVAL_S,
+            ),
+        ] {
+            range.check(key, value)?;
         }
         if self.sensor.is_empty() {
             return Err(ConfigError::OutOfRange {
@@ -435,11 +591,6 @@ impl DaemonConfig {
                 });
             }
         }
-        positive("pipeline.max_range_m", self.pipeline.max_range_m)?;
-        positive(
-            "workspace.max_object_size_m",
-            self.workspace.max_object_size_m,
-        )?;
         for (key, corner) in [
             ("workspace.min_m", self.workspace.min_m),
             ("workspace.max_m", self.workspace.max_m),
@@ -461,12 +612,6 @@ impl DaemonConfig {
                 });
             }
         }
-        positive("track.voxel_size_m", self.track.voxel_size_m)?;
-        positive("track.leave_after_s", self.track.leave_after_s)?;
-        positive("track.remesh_interval_s", self.track.remesh_interval_s)?;
-        positive("mesh.max_residual_m", self.mesh.max_residual_m)?;
-        positive("stats.publish_interval_s", self.stats.publish_interval_s)?;
-        positive("stats.log_interval_s", self.stats.log_interval_s)?;
         if !(1..=64).contains(&self.pipeline.ring_capacity) {
             return Err(ConfigError::OutOfRange {
                 key: "pipeline.ring_capacity",
@@ -558,11 +703,19 @@ impl DaemonConfig {
     }
 
     pub(crate) fn leave_after(&self) -> Duration {
-        Duration::from_secs_f32(self.track.leave_after_s)
+        LEAVE_AFTER_S.duration(self.track.leave_after_s)
     }
 
     pub(crate) fn remesh_interval(&self) -> Duration {
-        Duration::from_secs_f32(self.track.remesh_interval_s)
+        REMESH_INTERVAL_S.duration(self.track.remesh_interval_s)
+    }
+
+    pub(crate) fn stats_publish_interval(&self) -> Duration {
+        PUBLISH_INTERVAL_S.duration(self.stats.publish_interval_s)
+    }
+
+    pub(crate) fn stats_log_interval(&self) -> Duration {
+        LOG_INTERVAL_S.duration(self.stats.log_interval_s)
     }
 }
 
@@ -888,6 +1041,54 @@ mod tests {
                 .level,
             "warn,tacmesh::daemon=debug"
         );
+    }
+
+    /// Every duration and size key refuses what once aborted the daemon (1e30 s overflowed
+    /// `Duration`, 9.2e18 s overflowed `Instant`) and what is absurd (a 1e-30 m voxel),
+    /// naming the key and its line; every value it takes becomes a duration without panic.
+    #[test]
+    fn durations_and_sizes_out_of_their_documented_range_fail_with_key_and_line() {
+        let keys = [
+            ("pipeline", "max_range_m"),
+            ("workspace", "max_object_size_m"),
+            ("track", "voxel_size_m"),
+            ("track", "leave_after_s"),
+            ("track", "remesh_interval_s"),
+            ("mesh", "max_residual_m"),
+            ("stats", "publish_interval_s"),
+            ("stats", "log_interval_s"),
+        ];
+        let bad = [
+            "1e30", "9.2e18", "1e-30", "0.0", "-1.0", "inf", "-inf", "nan",
+        ];
+        for (section, key) in keys {
+            for value in bad {
+                // The key on line 3, after a comment, so that the line is the key's own.
+                let text = format!("# a config\n[{section}]\n{key} = {value}\n");
+                let err = parse(&text).expect_err(&text).to_string();
+                assert!(err.contains(&format!("{section}.{key}")), "{text}: {err}");
+                assert!(err.contains("line 3"), "{text}: {err}");
+                assert!(err.contains(" to "), "the range is given: {err}");
+            }
+        }
+        // Many values spread over the float range, as a property: each is refused, or the
+        // durations it becomes are what it says.
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        for _ in 0..2_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let value = f32::from_bits(x as u32);
+            for (section, key) in keys {
+                let text = format!("[{section}]\n{key} = {value:e}\n");
+                let Ok(config) = parse(&text) else { continue };
+                let _ = (config.leave_after(), config.remesh_interval());
+                let _ = (config.stats_publish_interval(), config.stats_log_interval());
+                assert!(config.validate().is_ok());
+            }
+        }
+        let config = parse("[track]\nleave_after_s = 86400\n").unwrap();
+        assert_eq!(config.leave_after(), Duration::from_secs(86_400));
     }
 
     #[test]

@@ -100,10 +100,11 @@ impl StopSignal {
     /// Waits up to `timeout`; true when a stop was requested.
     pub fn wait_timeout(&self, timeout: Duration) -> bool {
         let (flag, changed) = &*self.inner;
-        let deadline = Instant::now() + timeout;
+        // A timeout past what the clock can hold waits until a stop.
+        let deadline = Instant::now().checked_add(timeout);
         let mut requested = crate::lock(flag);
         while !*requested {
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = deadline.map_or(timeout, |d| d.saturating_duration_since(Instant::now()));
             if left.is_zero() {
                 break;
             }
@@ -284,8 +285,8 @@ impl Daemon {
     /// Tells systemd READY=1 once a source thread runs (the socket is bound by then), then
     /// keeps STATUS= fresh and feeds the watchdog while the pipeline is alive.
     pub fn run_until_stopped(mut self, stop: &StopSignal) -> CounterSnapshot {
-        let stats_every = Duration::from_secs_f32(self.shared.config.stats.publish_interval_s);
-        let log_every = Duration::from_secs_f32(self.shared.config.stats.log_interval_s);
+        let stats_every = self.shared.config.stats_publish_interval();
+        let log_every = self.shared.config.stats_log_interval();
         let mut next_log = Instant::now() + log_every;
         let mut said_ended = false;
         // The sensors opened and the socket was bound in `start`; ready once a source thread

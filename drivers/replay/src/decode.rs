@@ -298,7 +298,18 @@ pub fn decode_z16(bytes: &[u8], name: &str, layout: Z16Layout) -> Result<DepthIm
             ),
         ));
     }
-    let padded = stride * height as usize;
+    // The layout comes from the spec or a file name: a stride or height whose product
+    // overflows (row_stride_bytes=576460752303424768 once panicked here) fits no file.
+    let Some(padded) = stride.checked_mul(height as usize) else {
+        return Err(malformed(
+            name,
+            format!(
+                "{} bytes, but a {width}x{height} Z16 image with a row stride of {stride} bytes \
+                 would be larger than memory: check the width, height and stride",
+                bytes.len()
+            ),
+        ));
+    };
     let tight = padded - (stride - row_bytes);
     if bytes.len() != padded && bytes.len() != tight {
         return Err(malformed(
@@ -411,6 +422,26 @@ mod tests {
         };
         let image = decode_z16(&bytes, "t.z16", layout).expect("padded Z16");
         assert_eq!(image.depth, vec![1, 2, 3, 0x0104]);
+    }
+
+    /// A stride times height that overflows `usize` is a malformed layout, not a panic.
+    #[test]
+    fn z16_rejects_a_layout_larger_than_memory() {
+        for (width, height, stride) in [
+            (640, 480, 576_460_752_303_424_768usize),
+            (u32::MAX, u32::MAX, usize::MAX),
+            (1, u32::MAX, usize::MAX / 2),
+        ] {
+            let layout = Z16Layout {
+                row_stride_bytes: Some(stride),
+                ..Z16Layout::packed(width, height)
+            };
+            let err = decode_z16(&[0; 64], "t.z16", layout).unwrap_err();
+            assert!(matches!(err, DecodeError::Malformed { .. }), "{err}");
+        }
+        // Packed, the stride is computed: 2 × u32::MAX fits a 64-bit usize, × height does not.
+        let err = decode_z16(&[0; 64], "t.z16", Z16Layout::packed(u32::MAX, u32::MAX)).unwrap_err();
+        assert!(matches!(err, DecodeError::Malformed { .. }), "{err}");
     }
 
     #[test]

@@ -17,6 +17,11 @@ pub enum Pacing {
     Recorded,
 }
 
+/// The slowest fixed replay rate: a frame every 100 s.
+pub const MIN_FPS: f64 = 0.01;
+/// The fastest fixed replay rate (faster is `rate=max`).
+pub const MAX_FPS: f64 = 1_000.0;
+
 /// The clock side of [`Pacing`]: remembers when the pass started and sleeps until each frame
 /// is due.
 #[derive(Debug, Clone)]
@@ -39,8 +44,8 @@ impl Pacer {
     /// Why this pacing cannot be followed, if it cannot: a fixed rate must be positive.
     pub(crate) fn check(pacing: Pacing) -> Result<(), String> {
         match pacing {
-            Pacing::Fixed { fps } if !(fps.is_finite() && fps > 0.0) => Err(format!(
-                "a fixed rate of {fps} frames per second is not a positive rate"
+            Pacing::Fixed { fps } if !(MIN_FPS..=MAX_FPS).contains(&fps) => Err(format!(
+                "a fixed rate of {fps} frames per second is not from {MIN_FPS} to {MAX_FPS}"
             )),
             _ => Ok(()),
         }
@@ -59,15 +64,18 @@ impl Pacer {
             (Pacing::Fixed { fps }, _) => self.last.and_then(|last| {
                 Duration::try_from_secs_f64(1.0 / fps)
                     .ok()
-                    .map(|p| last + p)
+                    .and_then(|p| last.checked_add(p))
             }),
             (Pacing::Recorded, Some(t)) => match self.anchor {
                 None => {
                     self.anchor = Some((now, t));
                     None
                 }
-                // Timestamps that go backwards mean "now", not a panic.
-                Some((start, t0)) => Duration::try_from_secs_f64(t - t0).ok().map(|d| start + d),
+                // Timestamps that go backwards, or so far ahead that no clock holds them,
+                // mean "now", not a panic.
+                Some((start, t0)) => Duration::try_from_secs_f64(t - t0)
+                    .ok()
+                    .and_then(|d| start.checked_add(d)),
             },
             (Pacing::Recorded, None) => None,
         };
@@ -100,9 +108,25 @@ mod tests {
         pacer.wait(Some(100.03));
         assert!(start.elapsed() >= Duration::from_millis(30));
         pacer.restart();
-        let again = Instant::now();
+        assert_eq!(pacer.anchor, None);
         pacer.wait(Some(100.0));
-        assert!(again.elapsed() < Duration::from_millis(20));
+        assert_eq!(pacer.anchor.map(|(_, t0)| t0), Some(100.0));
+    }
+
+    /// A recorded timestamp too far ahead for any clock (a corrupt recording) is "now", and a
+    /// fixed rate whose period overflows is refused when the spec is checked.
+    #[test]
+    fn timestamps_and_rates_past_the_clock_do_not_panic() {
+        let mut pacer = Pacer::new(Pacing::Recorded);
+        pacer.wait(Some(0.0));
+        pacer.wait(Some(1e300));
+        pacer.wait(Some(f64::INFINITY));
+        pacer.wait(Some(f64::NAN));
+        for fps in [1e-30, 0.0, -1.0, f64::NAN, f64::INFINITY, 1e9] {
+            let err = Pacer::check(Pacing::Fixed { fps }).unwrap_err();
+            assert!(err.contains("not from 0.01 to 1000"), "{fps}: {err}");
+        }
+        assert!(Pacer::check(Pacing::Fixed { fps: 30.0 }).is_ok());
     }
 }
 
