@@ -5,7 +5,8 @@
 //! - [`frame_ring::FrameRing`]: the bounded, drop-oldest queue between sensors and pipeline.
 //! - [`latency::LatencyWindow`]: p50/p99 latencies for the daemon's stats.
 //! - [`log_sink::StderrSink`]: log output that survives a log reader going away.
-//! - [`daemon::Daemon`]: `tacmesh run`, the live daemon; [`subscriber::Subscription`]: a client.
+//! - [`daemon::Daemon`]: `tacmesh run`, the live daemon; [`subscriber::Subscription`]: a client;
+//!   [`socket_dir`]: the default socket path and its private directory.
 //! - Re-exported crates: [`formats`] (files), [`reconstruct`], [`simplify`], [`sim`] (shapes,
 //!   sampling, the metric, a simulated depth camera), [`source`] (the depth-source trait and
 //!   the frame, cloud and mesh types).
@@ -17,6 +18,7 @@ pub mod latency;
 pub mod log_sink;
 pub mod physics_scene;
 pub mod pipeline;
+pub mod socket_dir;
 pub mod subscriber;
 
 pub use tacmesh_formats as formats;

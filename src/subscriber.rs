@@ -38,6 +38,84 @@ pub enum SubscribeError {
     Closed { path: PathBuf },
     #[error("the daemon on {} refused this subscriber: {reason}", path.display())]
     Refused { path: PathBuf, reason: String },
+    #[error(
+        "{} is served by uid {uid}{}, not by you, root or the tacmesh service user: another \
+         local user may be impersonating the daemon; pass --trust-uid {uid} if you meant to \
+         connect to it",
+        path.display(),
+        user.as_ref().map(|name| format!(" ({name})")).unwrap_or_default()
+    )]
+    Untrusted {
+        path: PathBuf,
+        uid: u32,
+        user: Option<String>,
+    },
+    #[error("cannot tell who serves {}: {cause}", path.display())]
+    PeerCredentials {
+        path: PathBuf,
+        cause: std::io::Error,
+    },
+}
+
+/// The users a subscriber accepts as the server at the other end of the socket (checked with
+/// the kernel's `SO_PEERCRED` when it connects): anyone who can bind a socket path first could
+/// otherwise serve forged meshes to it, and from it to an operator's physics.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TrustedServers {
+    uids: Vec<u32>,
+}
+
+/// The system user the packaged service runs as (systemd/tacmesh.sysusers).
+pub const SERVICE_USER: &str = "tacmesh";
+
+impl Default for TrustedServers {
+    /// The subscriber's own effective user, root, and the service user `tacmesh` if this
+    /// system has one.
+    fn default() -> Self {
+        let mut uids = vec![nix::unistd::geteuid().as_raw(), 0];
+        if let Ok(Some(user)) = nix::unistd::User::from_name(SERVICE_USER) {
+            uids.push(user.uid.as_raw());
+        }
+        uids.dedup();
+        Self { uids }
+    }
+}
+
+impl TrustedServers {
+    /// Trusts `uid` too (a daemon run by another user on purpose).
+    pub fn with_uid(mut self, uid: u32) -> Self {
+        if !self.uids.contains(&uid) {
+            self.uids.push(uid);
+        }
+        self
+    }
+
+    pub fn trusts(&self, uid: u32) -> bool {
+        self.uids.contains(&uid)
+    }
+
+    /// Refuses the server at the other end of `stream` unless it runs as a trusted user.
+    fn check(&self, stream: &UnixStream, path: &Path) -> Result<(), SubscribeError> {
+        let credentials = rustix::net::sockopt::socket_peercred(stream).map_err(|errno| {
+            SubscribeError::PeerCredentials {
+                path: path.to_owned(),
+                cause: errno.into(),
+            }
+        })?;
+        let uid = credentials.uid.as_raw();
+        if self.trusts(uid) {
+            return Ok(());
+        }
+        let user = nix::unistd::User::from_uid(nix::unistd::Uid::from_raw(uid))
+            .ok()
+            .flatten()
+            .map(|user| user.name);
+        Err(SubscribeError::Untrusted {
+            path: path.to_owned(),
+            uid,
+            user,
+        })
+    }
 }
 
 /// One connection to the daemon.
@@ -65,11 +143,23 @@ impl Subscription {
         read_timeout: Option<Duration>,
         options: Option<Subscribe>,
     ) -> Result<Self, SubscribeError> {
+        Self::connect_trusting(path, read_timeout, options, &TrustedServers::default())
+    }
+
+    /// [`Subscription::connect_with`], accepting a server run by one of `trusted` (and no
+    /// other: its connection is closed before anything is read from it).
+    pub fn connect_trusting(
+        path: &Path,
+        read_timeout: Option<Duration>,
+        options: Option<Subscribe>,
+        trusted: &TrustedServers,
+    ) -> Result<Self, SubscribeError> {
         let connect_err = |cause| SubscribeError::Connect {
             path: path.to_owned(),
             cause,
         };
         let mut stream = UnixStream::connect(path).map_err(connect_err)?;
+        trusted.check(&stream, path)?;
         stream.set_read_timeout(read_timeout).map_err(connect_err)?;
         if let Some(options) = options {
             let mut frame = Vec::new();

@@ -146,7 +146,7 @@ fn default_socket_without_user_or_runtime_dir_is_named_by_uid() {
         .output()
         .expect("the tacmesh binary runs");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    let expected = format!("/tmp/tacmesh-{uid}.sock");
+    let expected = format!("/tmp/tacmesh-{uid}/tacmesh.sock");
     // A daemon of this user may be serving there; then the client connects, prints where and
     // stops (`--count 0`).
     let stdout = String::from_utf8_lossy(&out.stdout);

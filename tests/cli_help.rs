@@ -61,7 +61,7 @@ fn run_help_and_readme_name_every_sensor_spec_prefix() {
     }
     // And what each option does is up to date.
     assert!(help.contains("replay:PATH?fx="), "{help}");
-    assert!(help.contains("/tmp/tacmesh-UID.sock"), "{help}");
+    assert!(help.contains("/tmp/tacmesh-UID/tacmesh.sock"), "{help}");
     assert!(!help.contains("simulated sensors only"), "{help}");
 }
 

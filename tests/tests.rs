@@ -12,6 +12,7 @@ mod real_scans;
 mod real_scenes;
 mod reliability;
 mod replay;
+mod security;
 mod systemd;
 #[cfg(feature = "zenoh")]
 mod zenoh;

@@ -4,7 +4,7 @@
 use std::io::ErrorKind;
 use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
 use std::os::unix::net::{UnixListener, UnixStream};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::PublishError;
 
@@ -18,28 +18,32 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
     if mode & !0o7777 != 0 {
         return Err(PublishError::InvalidMode { mode });
     }
-    if let Some(dir) = path.parent().filter(|dir| !dir.as_os_str().is_empty()) {
-        if !dir.is_dir() {
-            return Err(PublishError::NoSocketDir {
-                dir: dir.to_path_buf(),
-            });
-        }
+    let dir = match path.parent().filter(|dir| !dir.as_os_str().is_empty()) {
+        Some(dir) => dir,
+        None => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(PublishError::NoSocketDir {
+            dir: dir.to_path_buf(),
+        });
     }
+    check_socket_dir(dir)?;
     clear_stale(path)?;
 
     // The socket file appears only once it is listening and has its mode: a client that waits
     // for the file and then connects is never refused. `UnixListener::bind` binds and then
-    // listens, so the socket is bound under a private name beside `path`, given its mode and
-    // group there, and hard-linked to `path` (which fails if `path` exists: another daemon won
-    // the race between our check and our link).
-    let listener = match bind_privately(path, mode, group)? {
+    // listens, so the socket is bound in a fresh private directory beside `path`, given its
+    // mode and group there, and hard-linked to `path` (which fails if `path` exists: another
+    // daemon won the race between our check and our link).
+    let listener = match bind_privately(path, dir, mode, group)? {
         Some(listener) => listener,
         // No private name could be bound or linked (too long for a socket address, or a file
         // system without hard links): bind in place, where a client may be refused for the
-        // moment before `listen`.
+        // moment before `listen`. The directory passed `check_socket_dir`, so no other user
+        // can swap the name for a symlink between the bind and the chmod.
         None => {
             let listener = UnixListener::bind(path).map_err(|source| bind_error(path, source))?;
-            if let Err(error) = prepare(path, path, mode, group) {
+            if let Err(error) = prepare_in_place(path, mode, group) {
                 remove_if_ours(path, file_id(path));
                 return Err(error);
             }
@@ -52,38 +56,104 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
     })
 }
 
-/// Binds under a private name beside `path`, sets its mode and group, and links it to `path`;
-/// `None` if the private name cannot be bound or linked.
+/// Refuses a directory in which another user could replace the socket or what the daemon
+/// chmods: one that others (group or world) can write and that is not sticky, or that belongs
+/// to a user other than the daemon's and root.
+fn check_socket_dir(dir: &Path) -> Result<(), PublishError> {
+    let unsafe_dir = |reason: String| PublishError::UnsafeSocketDir {
+        dir: dir.to_path_buf(),
+        reason,
+    };
+    let metadata = std::fs::metadata(dir).map_err(|source| PublishError::Probe {
+        path: dir.to_path_buf(),
+        cause: source,
+    })?;
+    let (mode, owner) = (metadata.mode(), metadata.uid());
+    let me = rustix::process::geteuid().as_raw();
+    if owner != me && owner != 0 {
+        return Err(unsafe_dir(format!(
+            "it belongs to uid {owner}, who could replace the socket (the daemon runs as uid {me})"
+        )));
+    }
+    if mode & 0o022 != 0 && mode & 0o1000 == 0 {
+        return Err(unsafe_dir(format!(
+            "others can write to it (mode {:04o}) and it is not sticky, so any of them could \
+             replace the socket",
+            mode & 0o7777
+        )));
+    }
+    Ok(())
+}
+
+/// Binds in a fresh private directory beside `path` (mode 0700, checked through its file
+/// descriptor), sets the socket's mode and group there by name relative to that descriptor, and
+/// links it to `path`; `None` if the private socket cannot be bound or linked. Another user
+/// who can rename entries of `dir` cannot make the chmod or chown land on a file of their
+/// choosing: the socket's name is looked up only in a directory nobody else can write.
 fn bind_privately(
     path: &Path,
+    dir: &Path,
     mode: u32,
     group: Option<u32>,
 ) -> Result<Option<UnixListener>, PublishError> {
-    let Some(private) = private_name(path) else {
+    use rustix::fs::{AtFlags, Mode, OFlags};
+    let Some(name) = path.file_name() else {
         return Ok(None);
     };
-    let _ = std::fs::remove_file(&private); // left by an earlier process with our pid
-    let Ok(listener) = UnixListener::bind(&private) else {
+    let private_name = format!(".{}.{}.binding", name.to_string_lossy(), std::process::id());
+    let directory = OFlags::DIRECTORY | OFlags::NOFOLLOW | OFlags::CLOEXEC | OFlags::RDONLY;
+    let Ok(dir_fd) = rustix::fs::open(dir, directory, Mode::empty()) else {
         return Ok(None);
     };
-    let linked = prepare(&private, path, mode, group).and_then(|()| {
-        match std::fs::hard_link(&private, path) {
+    // Left empty by an earlier process with our pid (anything else there, a symlink above
+    // all, stays, and the socket is then bound in place).
+    let _ = rustix::fs::unlinkat(&dir_fd, private_name.as_str(), AtFlags::REMOVEDIR);
+    if rustix::fs::mkdirat(&dir_fd, private_name.as_str(), Mode::RWXU).is_err() {
+        return Ok(None);
+    }
+    let remove_private = || {
+        let _ = rustix::fs::unlinkat(&dir_fd, private_name.as_str(), AtFlags::REMOVEDIR);
+    };
+    let Ok(private_fd) =
+        rustix::fs::openat(&dir_fd, private_name.as_str(), directory, Mode::empty())
+    else {
+        remove_private();
+        return Ok(None);
+    };
+    // What was opened is the directory just made, not one another user put in its place.
+    let me = rustix::process::geteuid().as_raw();
+    match rustix::fs::fstat(&private_fd) {
+        Ok(stat) if stat.st_uid == me && stat.st_mode & 0o077 == 0 => {}
+        _ => {
+            return Err(PublishError::UnsafeSocketDir {
+                dir: dir.to_path_buf(),
+                reason: format!(
+                    "its private directory {private_name} was replaced while the socket was \
+                     being bound: another user is racing the daemon"
+                ),
+            })
+        }
+    }
+    let Ok(listener) = UnixListener::bind(dir.join(&private_name).join("s")) else {
+        remove_private();
+        return Ok(None);
+    };
+    #[cfg(test)]
+    tests::after_bind(dir, &private_name);
+    let linked = prepare_at(&private_fd, path, mode, group).and_then(|()| {
+        match rustix::fs::linkat(&private_fd, "s", &dir_fd, name, AtFlags::empty()) {
             Ok(()) => Ok(true),
             // Another daemon won the race between our check and our link.
-            Err(source) if source.kind() == ErrorKind::AlreadyExists => {
-                Err(bind_error(path, source))
-            }
+            Err(rustix::io::Errno::EXIST) => Err(bind_error(
+                path,
+                std::io::Error::from(ErrorKind::AlreadyExists),
+            )),
             Err(_) => Ok(false),
         }
     });
-    let _ = std::fs::remove_file(&private);
+    let _ = rustix::fs::unlinkat(&private_fd, "s", AtFlags::empty());
+    remove_private();
     Ok(linked?.then_some(listener))
-}
-
-/// `.NAME.PID.binding` beside `path`, if `path` has a file name.
-fn private_name(path: &Path) -> Option<PathBuf> {
-    let name = path.file_name()?.to_str()?;
-    Some(path.with_file_name(format!(".{name}.{}.binding", std::process::id())))
 }
 
 fn bind_error(path: &Path, source: std::io::Error) -> PublishError {
@@ -99,9 +169,42 @@ fn bind_error(path: &Path, source: std::io::Error) -> PublishError {
     }
 }
 
-/// Gives the socket file at `at` (to be published as `path`) its mode and group.
-fn prepare(at: &Path, path: &Path, mode: u32, group: Option<u32>) -> Result<(), PublishError> {
-    std::fs::set_permissions(at, std::fs::Permissions::from_mode(mode)).map_err(|source| {
+/// Gives the socket `s` in the private directory `private_fd` (to be published as `path`) its
+/// mode and group, by name relative to that directory.
+fn prepare_at(
+    private_fd: &impl std::os::fd::AsFd,
+    path: &Path,
+    mode: u32,
+    group: Option<u32>,
+) -> Result<(), PublishError> {
+    use rustix::fs::{AtFlags, Mode};
+    rustix::fs::chmodat(private_fd, "s", Mode::from_raw_mode(mode), AtFlags::empty()).map_err(
+        |errno| PublishError::SetMode {
+            path: path.to_path_buf(),
+            mode,
+            cause: errno.into(),
+        },
+    )?;
+    if let Some(gid) = group {
+        let set_group = |cause: std::io::Error| PublishError::SetGroup {
+            path: path.to_path_buf(),
+            gid,
+            cause,
+        };
+        // -1 means "leave unchanged" to chown, and is no group.
+        if gid == u32::MAX {
+            return Err(set_group(ErrorKind::InvalidInput.into()));
+        }
+        let gid = rustix::fs::Gid::from_raw(gid);
+        rustix::fs::chownat(private_fd, "s", None, Some(gid), AtFlags::SYMLINK_NOFOLLOW)
+            .map_err(|errno| set_group(errno.into()))?;
+    }
+    Ok(())
+}
+
+/// Gives the socket file at `path` its mode and group (bound in place, in a checked directory).
+fn prepare_in_place(path: &Path, mode: u32, group: Option<u32>) -> Result<(), PublishError> {
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).map_err(|source| {
         PublishError::SetMode {
             path: path.to_path_buf(),
             mode,
@@ -109,10 +212,12 @@ fn prepare(at: &Path, path: &Path, mode: u32, group: Option<u32>) -> Result<(), 
         }
     })?;
     if let Some(gid) = group {
-        std::os::unix::fs::chown(at, None, Some(gid)).map_err(|source| PublishError::SetGroup {
-            path: path.to_path_buf(),
-            gid,
-            cause: source,
+        std::os::unix::fs::lchown(path, None, Some(gid)).map_err(|source| {
+            PublishError::SetGroup {
+                path: path.to_path_buf(),
+                gid,
+                cause: source,
+            }
         })?;
     }
     Ok(())
@@ -173,5 +278,31 @@ pub(crate) fn remove_if_ours(path: &Path, ours: Option<(u64, u64)>) {
             "cannot remove the socket {}: {error}; remove it before the next start",
             path.display()
         );
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use std::path::{Path, PathBuf};
+    use std::sync::Mutex;
+
+    type Hook = Box<dyn Fn(&Path, &str) + Send>;
+
+    /// What a test does between the private bind and the chmod, for sockets in its directory:
+    /// the moment another user once won by swapping a name for a symlink.
+    static AFTER_BIND: Mutex<Vec<(PathBuf, Hook)>> = Mutex::new(Vec::new());
+
+    pub(crate) fn on_bind_in(dir: &Path, hook: impl Fn(&Path, &str) + Send + 'static) {
+        let mut hooks = AFTER_BIND.lock().unwrap_or_else(|e| e.into_inner());
+        hooks.push((dir.to_path_buf(), Box::new(hook)));
+    }
+
+    pub(super) fn after_bind(dir: &Path, private_name: &str) {
+        let hooks = AFTER_BIND.lock().unwrap_or_else(|e| e.into_inner());
+        for (hook_dir, hook) in hooks.iter() {
+            if hook_dir == dir {
+                hook(dir, private_name);
+            }
+        }
     }
 }

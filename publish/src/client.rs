@@ -329,6 +329,10 @@ impl Client {
     fn is_closed(&self) -> bool {
         lock(&self.pending).closed
     }
+
+    pub(crate) fn stream(&self) -> &UnixStream {
+        &self.stream
+    }
 }
 
 pub(crate) fn start_threads(shared: &Arc<Shared>, client: &Arc<Client>) -> std::io::Result<()> {
@@ -723,17 +727,11 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
 /// A subscriber broke the protocol: it is counted as dropped, the log says why, and so does the
 /// Goodbye its writer sends before closing (what was queued for it is discarded), so that a
 /// client with a bug learns what it did. Everyone else is served as before.
-fn dismiss_with_goodbye(shared: &Shared, client: &Client, why: &str) {
+pub(crate) fn dismiss_with_goodbye(shared: &Shared, client: &Client, why: &str) {
     shared.clients_dropped.fetch_add(1, Ordering::Relaxed);
     tracing::warn!(client = client.id, "dropping subscriber: {why}");
-    let mut reason = format!("dropped: {why}");
-    if reason.len() > MAX_REASON_BYTES {
-        let mut end = MAX_REASON_BYTES;
-        while !reason.is_char_boundary(end) {
-            end -= 1;
-        }
-        reason.truncate(end);
-    }
+    let reason =
+        crate::cap_at_char_boundary(&format!("dropped: {why}"), MAX_REASON_BYTES).to_owned();
     let mut frame = Vec::new();
     if encode(&Message::Goodbye { reason }, &mut frame).is_ok() {
         client.dismiss(frame);

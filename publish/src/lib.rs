@@ -180,6 +180,14 @@ pub enum PublishError {
     NoSocketDir { dir: PathBuf },
 
     #[error(
+        "will not serve a socket in {}: {reason}; use a directory only the daemon's user \
+         (or root) can write, such as $XDG_RUNTIME_DIR or systemd's RuntimeDirectory \
+         (/run/tacmesh)",
+        dir.display()
+    )]
+    UnsafeSocketDir { dir: PathBuf, reason: String },
+
+    #[error(
         "cannot check whether a daemon serves {}: {cause}; check the permissions of the \
          path or choose another --socket",
         path.display()
@@ -288,7 +296,8 @@ pub(crate) struct Shared {
     /// [`WRITE_TIMEOUT`] except in tests.
     write_timeout: Duration,
     state: Mutex<State>,
-    allowed_peers: Option<AllowedPeers>,
+    /// Replaced by [`Publisher::set_allowed_peers`] when the daemon reads the lists again.
+    allowed_peers: Mutex<Option<AllowedPeers>>,
     clients_dropped: AtomicU64,
     clients_refused: AtomicU64,
     shapes_published: AtomicU64,
@@ -364,7 +373,7 @@ impl Publisher {
             hello,
             write_timeout,
             state: Mutex::new(State::default()),
-            allowed_peers: config.allowed_peers.clone(),
+            allowed_peers: Mutex::new(config.allowed_peers.clone()),
             clients_dropped: AtomicU64::new(0),
             clients_refused: AtomicU64::new(0),
             shapes_published: AtomicU64::new(0),
@@ -620,6 +629,39 @@ impl Publisher {
         state.mirrors.push(mirror);
     }
 
+    /// Replaces who may subscribe (the daemon reads its allow lists again, so that a user
+    /// removed from an allowed group loses access without a restart). Subscribers connected
+    /// now whose credentials the new lists do not admit are told so in a Goodbye and dropped;
+    /// returns how many.
+    pub fn set_allowed_peers(&self, allowed: Option<AllowedPeers>) -> usize {
+        *lock(&self.shared.allowed_peers) = allowed.clone();
+        let Some(allowed) = allowed else {
+            return 0;
+        };
+        let clients: Vec<Arc<Client>> =
+            lock(&self.shared.state).clients.values().cloned().collect();
+        let mut revoked = 0;
+        for client in clients {
+            let Ok(credentials) = rustix::net::sockopt::socket_peercred(client.stream()) else {
+                continue;
+            };
+            let (uid, gid) = (credentials.uid.as_raw(), credentials.gid.as_raw());
+            if allowed.allows(uid, gid) {
+                continue;
+            }
+            revoked += 1;
+            client::dismiss_with_goodbye(
+                &self.shared,
+                &client,
+                &format!(
+                    "uid {uid} gid {gid} is no longer in the daemon's socket.allow_users or \
+                     socket.allow_groups"
+                ),
+            );
+        }
+        revoked
+    }
+
     /// The counters so far.
     pub fn counters(&self) -> PublisherCounters {
         let clients_connected = lock(&self.shared.state).clients.len();
@@ -723,7 +765,7 @@ fn frame_of(message: &Message) -> Result<Vec<u8>, WireError> {
     encode(message, &mut bytes).map(|()| bytes)
 }
 
-fn cap_at_char_boundary(text: &str, max: usize) -> &str {
+pub(crate) fn cap_at_char_boundary(text: &str, max: usize) -> &str {
     if text.len() <= max {
         return text;
     }
@@ -811,9 +853,7 @@ impl Shared {
     /// `None` when it does. A refusal is counted; the first and every power of two after it
     /// are logged, so a client retrying in a loop cannot flood the log.
     fn peer_refusal(&self, stream: &UnixStream) -> Option<String> {
-        let Some(allowed) = &self.allowed_peers else {
-            return None;
-        };
+        let allowed = lock(&self.allowed_peers).clone()?;
         let (verdict, who) = match rustix::net::sockopt::socket_peercred(stream) {
             Ok(cred) => {
                 let (uid, gid) = (cred.uid.as_raw(), cred.gid.as_raw());

@@ -435,6 +435,151 @@ fn socket_file_mode_follows_config() {
     assert_eq!(PublisherConfig::new("x").mode, 0o660);
 }
 
+/// A directory others can write and that is not sticky is refused, saying why; a sticky one
+/// (such as /tmp) and the daemon's own are served in.
+#[test]
+fn a_socket_directory_others_can_write_is_refused_unless_sticky() {
+    let dir = tempfile::tempdir().unwrap();
+    let set_mode = |mode: u32| {
+        std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(mode)).unwrap()
+    };
+    for mode in [0o777, 0o775, 0o757] {
+        set_mode(mode);
+        let error = Publisher::bind(PublisherConfig::new(socket_in(&dir))).unwrap_err();
+        assert!(
+            matches!(error, PublishError::UnsafeSocketDir { .. }),
+            "{mode:o}: {error}"
+        );
+        assert!(error.to_string().contains("not sticky"), "{error}");
+        assert!(!socket_in(&dir).exists());
+    }
+    for mode in [0o1777, 0o755, 0o700] {
+        set_mode(mode);
+        let publisher = Publisher::bind(PublisherConfig::new(socket_in(&dir)));
+        assert!(publisher.is_ok(), "{mode:o}: {:?}", publisher.err());
+    }
+}
+
+/// Another user who can make entries in the socket's directory (a sticky one here) puts a
+/// symlink where the daemon makes its private name, pointing at a directory with a file named
+/// as the socket inside: the daemon's chmod and chown never reach that file (they once
+/// followed such a swapped name), and the socket is still served.
+#[test]
+fn the_mode_and_group_never_land_on_a_file_behind_a_planted_symlink() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o1777)).unwrap();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let victim = elsewhere.path().join("s");
+    std::fs::write(&victim, b"secret").unwrap();
+    std::fs::set_permissions(&victim, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let path = socket_in(&dir);
+    for planted in [
+        format!(".tacmesh.sock.{}.binding", std::process::id()),
+        "tacmesh.sock".to_owned(),
+    ] {
+        let link = dir.path().join(&planted);
+        std::os::unix::fs::symlink(elsewhere.path(), &link).unwrap();
+        let mut config = PublisherConfig::new(&path);
+        config.server_name = "tacmesh-test".into();
+        config.mode = 0o666;
+        let (_, gid) = own_ids(&elsewhere);
+        config.group = Some(gid);
+        let bound = Publisher::bind(config);
+        let mode = std::fs::metadata(&victim).unwrap().permissions().mode() & 0o7777;
+        assert_eq!(
+            mode, 0o600,
+            "the planted {planted} led the chmod to the victim"
+        );
+        assert_eq!(std::fs::read(&victim).unwrap(), b"secret");
+        if planted == "tacmesh.sock" {
+            // A symlink at the socket's own path is not a socket: refused, untouched.
+            assert!(matches!(bound, Err(PublishError::NotASocket { .. })));
+        } else {
+            let _publisher = bound.expect("served beside the planted name");
+            let mut client = TestClient::connect(&path);
+            client.hello();
+        }
+        std::fs::remove_file(&link).unwrap();
+    }
+}
+
+/// Between the bind and the chmod, "another user" renames the daemon's private directory away
+/// and puts a symlink to a directory of theirs in its place, holding a file named as the
+/// socket. The mode and group are set through the private directory's descriptor, so they
+/// land on the socket, not on that file (by path, they once did).
+#[test]
+fn the_mode_and_group_follow_no_name_swapped_during_the_bind() {
+    let dir = tempfile::tempdir().unwrap();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let victim = elsewhere.path().join("s");
+    std::fs::write(&victim, b"secret").unwrap();
+    std::fs::set_permissions(&victim, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let target = elsewhere.path().to_path_buf();
+    crate::bind::tests::on_bind_in(dir.path(), move |dir, private_name| {
+        std::fs::rename(dir.join(private_name), dir.join("moved")).unwrap();
+        std::os::unix::fs::symlink(&target, dir.join(private_name)).unwrap();
+    });
+    let path = socket_in(&dir);
+    let mut config = PublisherConfig::new(&path);
+    config.server_name = "tacmesh-test".into();
+    config.mode = 0o666;
+    let _publisher = Publisher::bind(config).expect("bound");
+    let mode = std::fs::metadata(&victim).unwrap().permissions().mode() & 0o7777;
+    assert_eq!(mode, 0o600, "the chmod followed the swapped name");
+    let socket_mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o7777;
+    assert_eq!(socket_mode, 0o666, "the socket got its mode");
+    let mut client = TestClient::connect(&path);
+    client.hello();
+}
+
+/// Access is read again: a subscriber whose user the new lists no longer admit (removed from
+/// an allowed group) gets a Goodbye saying so and is dropped; one still admitted stays, and a
+/// newcomer of the revoked user is refused.
+#[test]
+fn revoked_peers_are_dropped_when_the_lists_are_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let (uid, gid) = own_ids(&dir);
+    let path = socket_in(&dir);
+    let mut config = PublisherConfig::new(&path);
+    config.server_name = "tacmesh-test".into();
+    config.allowed_peers = Some(AllowedPeers {
+        member_uids: vec![uid],
+        ..AllowedPeers::default()
+    });
+    let publisher = Publisher::bind(config).unwrap();
+    let mut client = TestClient::connect(&path);
+    client.hello();
+    assert_eq!(client.snapshot(), vec![]);
+    // The same lists again: nobody is dropped.
+    let same = AllowedPeers {
+        member_uids: vec![uid],
+        ..AllowedPeers::default()
+    };
+    assert_eq!(publisher.set_allowed_peers(Some(same)), 0);
+    let revoked = AllowedPeers {
+        uids: vec![uid.wrapping_add(1)],
+        gids: vec![gid.wrapping_add(1)],
+        member_uids: vec![],
+    };
+    assert_eq!(publisher.set_allowed_peers(Some(revoked)), 1);
+    match client.next() {
+        Some(Message::Goodbye { reason }) => {
+            assert!(reason.contains("no longer in"), "{reason}");
+        }
+        other => panic!("expected a Goodbye, got {other:?}"),
+    }
+    assert_eq!(client.next(), None);
+    let mut newcomer = TestClient::connect(&path);
+    match newcomer.next() {
+        Some(Message::Goodbye { reason }) => assert!(reason.contains("not allowed"), "{reason}"),
+        other => panic!("expected a Goodbye, got {other:?}"),
+    }
+    // No lists at all: everyone the file mode lets in.
+    assert_eq!(publisher.set_allowed_peers(None), 0);
+    let mut again = TestClient::connect(&path);
+    again.hello();
+}
+
 /// This process's user and group, as the kernel will report them for its connections.
 fn own_ids(dir: &tempfile::TempDir) -> (u32, u32) {
     use std::os::unix::fs::MetadataExt;
@@ -574,7 +719,12 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     let mut config = PublisherConfig::new(&path);
     config.server_name = "tacmesh-test".into();
     let publisher = Publisher::bind_with_write_timeout(config, write_timeout).unwrap();
-    let mut stalled = TestClient::connect(&path); // reads only once it was dropped
+    // Reads its (empty) snapshot, then nothing until it was dropped. Read first, so that the
+    // snapshot is not still being written when the big shape comes (it would then carry the
+    // shape, and the SnapshotDone would be lost behind the timeout).
+    let mut stalled = TestClient::connect(&path);
+    stalled.hello();
+    assert_eq!(stalled.snapshot(), vec![]);
     let mut reader = TestClient::connect(&path);
     reader.hello();
     reader.snapshot();
@@ -604,8 +754,6 @@ fn client_that_reads_nothing_is_dropped_after_the_write_timeout() {
     assert_eq!(publisher.counters().clients_dropped, 1);
     // The dropped client finds, when it reads again, whole frames ending in a Goodbye that
     // says why (the frame it stalled in was finished first).
-    stalled.hello();
-    assert_eq!(stalled.snapshot(), vec![]);
     assert_eq!(stalled.shape().object_id(), 1);
     match stalled.expect() {
         Message::Goodbye { reason } => {

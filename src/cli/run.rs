@@ -35,8 +35,8 @@ SPEC is one of:
 ///
 /// With no options it runs the simulated demo scene (a table with objects that stand, move,
 /// appear and leave) and serves on $XDG_RUNTIME_DIR/tacmesh.sock (without a runtime directory,
-/// /tmp/tacmesh-UID.sock, UID being your numeric user id). Watch it from another terminal with
-/// `tacmesh subscribe`. Stop it with Ctrl-C or SIGTERM.
+/// /tmp/tacmesh-UID/tacmesh.sock in a directory of your own, UID being your numeric user id).
+/// Watch it from another terminal with `tacmesh subscribe`. Stop it with Ctrl-C or SIGTERM.
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// Config file (TOML; see tacmesh.example.toml). Options given here override it.
@@ -55,7 +55,8 @@ pub struct RunArgs {
     #[arg(long = "loop")]
     looping: bool,
     /// Socket path [default: $XDG_RUNTIME_DIR/tacmesh.sock; without a runtime directory,
-    /// /tmp/tacmesh-UID.sock (UID: your numeric user id; $TMPDIR instead of /tmp when set)]
+    /// /tmp/tacmesh-UID/tacmesh.sock (UID: your numeric user id; $TMPDIR instead of /tmp when
+    /// set)]
     #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
     /// Recordings and simulated sensors: take frames as fast as the pipeline consumes them

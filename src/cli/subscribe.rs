@@ -10,7 +10,7 @@ use tacmesh::physics::{write_mjcf, write_sdf, MjcfConfig, SdfConfig};
 use tacmesh::physics_scene::PhysicsScene;
 use tacmesh::protocol::{Encoding, Kinds, Message, Pose, Scene, SceneChange, Shape, Subscribe};
 use tacmesh::source::monotonic_now;
-use tacmesh::subscriber::Subscription;
+use tacmesh::subscriber::{Subscription, TrustedServers};
 use tacmesh::TriMesh;
 
 /// Connect to a running daemon and print one line per message: a new shape of an object (or
@@ -19,8 +19,8 @@ use tacmesh::TriMesh;
 #[derive(Debug, Args)]
 pub struct SubscribeArgs {
     /// Socket path [default, as `tacmesh run`: $XDG_RUNTIME_DIR/tacmesh.sock; without a runtime
-    /// directory, /tmp/tacmesh-UID.sock (UID: your numeric user id; $TMPDIR instead of /tmp
-    /// when set)]
+    /// directory, /tmp/tacmesh-UID/tacmesh.sock (UID: your numeric user id; $TMPDIR instead of
+    /// /tmp when set)]
     #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
     /// Write each object's latest mesh, in the world, to DIR/object-ID.ply and each support
@@ -70,13 +70,18 @@ pub struct SubscribeArgs {
     /// proxy, convex hulls, mass properties)
     #[arg(long)]
     no_bodies: bool,
+    /// Accept a daemon run by this user id too (repeat, or separate with commas). By default
+    /// only a daemon run by you, root or the service user `tacmesh` is believed: another
+    /// local user could otherwise bind the socket first and serve forged meshes
+    #[arg(long = "trust-uid", value_name = "UID", value_delimiter = ',')]
+    trust_uids: Vec<u32>,
     /// Only these object ids (repeat, or separate with commas)
     #[arg(long = "id", value_name = "ID", value_delimiter = ',')]
     ids: Vec<u64>,
     /// Read from Zenoh instead of the socket, joining as FILE's [zenoh] section says (the same
     /// section as the daemon's, with `connect` naming the daemon's or a router's endpoint);
     /// needs a build with the `zenoh` feature
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "extrapolate", "only", "ids", "no_bodies"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["socket", "compact", "max_rate_hz", "extrapolate", "only", "ids", "no_bodies", "trust_uids"])]
     zenoh: Option<PathBuf>,
 }
 
@@ -92,8 +97,28 @@ impl Source {
         if let Some(file) = &args.zenoh {
             return Self::open_zenoh(file);
         }
-        let socket = args.socket.clone().unwrap_or_else(default_socket_path);
-        let subscription = Subscription::connect_with(&socket, None, args.options())?;
+        let socket = match &args.socket {
+            Some(socket) => socket.clone(),
+            None => {
+                // Without a runtime directory the default socket is in a directory of the
+                // user's own: one that another user made is refused before connecting.
+                if let Some(dir) = tacmesh::socket_dir::private_fallback_dir() {
+                    match tacmesh::socket_dir::check_private_dir(&dir) {
+                        Err(tacmesh::socket_dir::SocketDirError::Probe { cause, .. })
+                            if cause.kind() == std::io::ErrorKind::NotFound => {}
+                        other => other?,
+                    }
+                }
+                default_socket_path()
+            }
+        };
+        let trusted = args
+            .trust_uids
+            .iter()
+            .fold(TrustedServers::default(), |trusted, &uid| {
+                trusted.with_uid(uid)
+            });
+        let subscription = Subscription::connect_trusting(&socket, None, args.options(), &trusted)?;
         let from = format!("{} on {}", subscription.server, socket.display());
         Ok((Source::Socket(subscription), from))
     }

@@ -3,6 +3,7 @@
 //! the repository root lists them all.
 
 use super::access::{allowed_peers, group_id, AccessError, Principal};
+use crate::socket_dir::default_socket_path;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tacmesh_publish::AllowedPeers;
@@ -166,8 +167,9 @@ impl PoseSection {
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SocketSection {
-    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or `tacmesh-UID.sock` (UID: the
-    /// numeric user id) in the temporary directory when there is no runtime directory.
+    /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or without a runtime directory
+    /// `tacmesh.sock` in the private directory `tacmesh-UID` (UID: the numeric user id) of the
+    /// temporary directory, made 0700 and checked to be the user's own.
     pub path: Option<PathBuf>,
     /// Permission bits of the socket file, as an octal string. Default `"0660"`.
     pub mode: Option<String>,
@@ -719,27 +721,6 @@ impl DaemonConfig {
     }
 }
 
-/// `$XDG_RUNTIME_DIR/tacmesh.sock` when the runtime directory is set and exists, else
-/// `tacmesh-UID.sock` in the temporary directory (`$TMPDIR`, else `/tmp`), UID being the
-/// process's numeric user id: per user, so two users do not collide, and the same for the
-/// daemon and `tacmesh subscribe` whatever their environment (`$USER` is often unset under
-/// systemd, cron or `env -i`, and can be set to anything).
-pub fn default_socket_path() -> PathBuf {
-    default_socket_path_for(
-        std::env::var_os("XDG_RUNTIME_DIR").map(PathBuf::from),
-        &std::env::temp_dir(),
-        nix::unistd::geteuid().as_raw(),
-    )
-}
-
-/// [`default_socket_path`] for a given runtime directory, temporary directory and user id.
-fn default_socket_path_for(runtime_dir: Option<PathBuf>, temp_dir: &Path, uid: u32) -> PathBuf {
-    match runtime_dir {
-        Some(dir) if dir.is_dir() => dir.join("tacmesh.sock"),
-        _ => temp_dir.join(format!("tacmesh-{uid}.sock")),
-    }
-}
-
 /// A tracing-subscriber filter whose every directive names a level: `info`, or
 /// `target=level` (a bare target, which tracing would take as "everything from it", is more
 /// likely a typo of a level in a config file).
@@ -1264,23 +1245,6 @@ mod tests {
 
     fn is_bare_key(key: &str) -> bool {
         !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-    }
-
-    #[test]
-    fn default_socket_is_in_the_runtime_dir_else_named_by_uid() {
-        let runtime = tempfile::tempdir().unwrap();
-        let tmp = Path::new("/tmp");
-        assert_eq!(
-            default_socket_path_for(Some(runtime.path().to_owned()), tmp, 1000),
-            runtime.path().join("tacmesh.sock")
-        );
-        let gone = runtime.path().join("gone");
-        for runtime_dir in [None, Some(gone)] {
-            assert_eq!(
-                default_socket_path_for(runtime_dir, tmp, 1000),
-                Path::new("/tmp/tacmesh-1000.sock")
-            );
-        }
     }
 
     #[test]

@@ -37,7 +37,8 @@ use std::time::{Duration, Instant};
 use tacmesh_publish::{PublishError, Publisher, PublisherConfig};
 use tacmesh_source::{DepthSource, SourceError};
 
-pub use config::{default_socket_path, ConfigError, DaemonConfig};
+pub use crate::socket_dir::default_socket_path;
+pub use config::{ConfigError, DaemonConfig};
 pub use counters::CounterSnapshot;
 pub use perception::track_config;
 pub use sensor::{SensorError, SensorSpec};
@@ -62,6 +63,8 @@ pub enum DaemonError {
     Sensor(#[from] Box<SensorError>),
     #[error(transparent)]
     Publish(#[from] PublishError),
+    #[error(transparent)]
+    SocketDir(#[from] crate::socket_dir::SocketDirError),
     #[cfg(feature = "zenoh")]
     #[error("config [zenoh]: {0}")]
     Zenoh(#[from] tacmesh_zenoh::ZenohError),
@@ -117,6 +120,17 @@ impl StopSignal {
     }
 }
 
+/// The allow lists for a log line.
+fn describe_peers(peers: Option<&tacmesh_publish::AllowedPeers>) -> String {
+    match peers {
+        None => "anyone the socket's mode lets connect".to_owned(),
+        Some(peers) => format!(
+            "users {:?}, primary groups {:?}, group members {:?}",
+            peers.uids, peers.gids, peers.member_uids
+        ),
+    }
+}
+
 /// What the daemon's threads share.
 pub(crate) struct Shared {
     config: DaemonConfig,
@@ -154,7 +168,13 @@ pub struct Daemon {
     heartbeats: Heartbeats,
     /// READY=1, STATUS=, WATCHDOG=1 and STOPPING=1 to systemd (a no-op without it).
     systemd: SystemdFeed,
+    /// Who may subscribe, as last resolved from `socket.allow_users` / `allow_groups`.
+    allowed_peers: Option<tacmesh_publish::AllowedPeers>,
 }
+
+/// How often the allow lists are resolved again (group membership changes without a restart:
+/// a user removed from an allowed group loses access within this time).
+const ACCESS_REFRESH: Duration = Duration::from_secs(10);
 
 impl Daemon {
     /// Opens the sensor, binds the socket and starts the threads. Fails before starting
@@ -183,9 +203,17 @@ impl Daemon {
             };
             sensors.push((spec, section.clone(), source));
         }
+        // The default socket without a runtime directory is in a directory of the user's own,
+        // made here and checked, so that no other user can have bound the path first.
+        if config.socket.path.is_none() {
+            if let Some(dir) = crate::socket_dir::private_fallback_dir() {
+                crate::socket_dir::ensure_private_dir(&dir)?;
+            }
+        }
         let mut publisher_config = PublisherConfig::new(config.socket_path());
         publisher_config.mode = config.socket_mode()?;
         (publisher_config.group, publisher_config.allowed_peers) = config.socket_access()?;
+        let allowed_peers = publisher_config.allowed_peers.clone();
         let publisher = Publisher::bind(publisher_config)?;
         #[cfg(feature = "zenoh")]
         if let Some(section) = &config.zenoh {
@@ -222,6 +250,7 @@ impl Daemon {
             started: Instant::now(),
             heartbeats: Heartbeats::default(),
             systemd: SystemdFeed::new(Notifier::from_env(), Instant::now()),
+            allowed_peers,
         };
         let spawn = |name: &'static str, body: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
@@ -301,8 +330,9 @@ impl Daemon {
             self.shared.publisher.socket_path().display()
         ));
         let mut next_stats = Instant::now() + stats_every;
+        let mut next_access = Instant::now() + ACCESS_REFRESH;
         loop {
-            let wake = next_stats.min(self.systemd.next_due());
+            let wake = next_stats.min(self.systemd.next_due()).min(next_access);
             if stop.wait_timeout(wake.saturating_duration_since(Instant::now())) {
                 break;
             }
@@ -312,6 +342,10 @@ impl Daemon {
                 let mesh_jobs_waiting = self.shared.mesh_queue.len();
                 self.systemd
                     .tick(now, &self.heartbeats, &snapshot, mesh_jobs_waiting);
+            }
+            if now >= next_access {
+                next_access = now + ACCESS_REFRESH;
+                self.refresh_access();
             }
             if now < next_stats {
                 continue;
@@ -343,6 +377,29 @@ impl Daemon {
             }
         }
         self.shutdown()
+    }
+
+    /// Resolves the allow lists again and hands changes to the publisher, which drops the
+    /// subscribers no longer admitted. A name that no longer resolves keeps the lists as they
+    /// were, with a warning (a passing NSS failure must not lock everyone out).
+    fn refresh_access(&mut self) {
+        let socket = &self.shared.config.socket;
+        if socket.allow_users.is_none() && socket.allow_groups.is_none() {
+            return;
+        }
+        match self.shared.config.socket_access() {
+            Ok((_, peers)) if peers != self.allowed_peers => {
+                let dropped = self.shared.publisher.set_allowed_peers(peers.clone());
+                tracing::info!(
+                    "socket.allow_users / allow_groups read again: {} ({dropped} subscribers \
+                     no longer admitted were dropped)",
+                    describe_peers(peers.as_ref())
+                );
+                self.allowed_peers = peers;
+            }
+            Ok(_) => {}
+            Err(err) => tracing::warn!("{err}; keeping who may subscribe as it was"),
+        }
     }
 
     /// Stops the source, finishes the frame and the mesh in flight, says goodbye to
