@@ -109,6 +109,21 @@ fn absurd_rates_and_durations_are_clap_errors() {
     }
 }
 
+/// An output mesh of a kind that cannot be written is refused before the cloud is read and
+/// meshed (it once failed only after the work).
+#[test]
+fn an_unwritable_output_mesh_is_refused_before_meshing() {
+    let stderr = stderr_of(&["mesh", "/nonexistent/cloud.ply", "-o", "x.stl"]);
+    assert!(
+        stderr.contains("x.stl") && stderr.contains(".ply or .obj"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("cloud.ply"),
+        "the cloud was read first: {stderr}"
+    );
+}
+
 /// `tacmesh eval … | head -0`: a closed standard output is a clear error and exit 1, not the
 /// panic (exit 101) that `println!` gives on a broken pipe.
 #[test]

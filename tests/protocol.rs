@@ -7,6 +7,8 @@
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use tacmesh::glam::Vec3;
@@ -21,22 +23,52 @@ use tacmesh::TriMesh;
 use crate::daemon::ONE_DAEMON_AT_A_TIME;
 use crate::reliability::Run;
 
-const RUN: Duration = Duration::from_secs(12);
+/// The shortest run: the demo's cone crosses the table, and a cylinder comes and goes.
+const MIN_RUN: Duration = Duration::from_secs(12);
+/// What the full and compact readers must have seen before the run may end: the checks below
+/// count on this many, whatever the machine's load makes of the frame rate.
+const ENOUGH_MOVING_POSES: usize = 90;
+const ENOUGH_STATS: usize = 10;
+/// A guard against a daemon that stops publishing, not a bound on its speed.
+const HANG_GUARD: Duration = Duration::from_secs(300);
 
 /// What one subscriber read: each message with its frame size and our monotonic time then.
 struct Read1 {
     messages: Vec<(u64, usize, Message)>,
 }
 
-fn read_for(mut subscription: Subscription, how_long: Duration) -> Read1 {
-    let until = Instant::now() + how_long;
+/// How far a reader has got: Poses of a moving object (the cone) and Stats, read so far.
+#[derive(Default)]
+struct Progress {
+    moving_poses: AtomicUsize,
+    stats: AtomicUsize,
+}
+
+impl Progress {
+    fn enough(&self) -> bool {
+        self.moving_poses.load(Ordering::Relaxed) >= ENOUGH_MOVING_POSES
+            && self.stats.load(Ordering::Relaxed) >= ENOUGH_STATS
+    }
+}
+
+/// Reads until `stop` is raised (the next message after it ends the read).
+fn read_until(mut subscription: Subscription, stop: &AtomicBool, progress: &Progress) -> Read1 {
     let mut messages = Vec::new();
     let mut frame = Vec::new();
-    while Instant::now() < until {
+    while !stop.load(Ordering::Relaxed) {
         let message = subscription.next_message().expect("the subscription");
         frame.clear();
         // The decoded message, encoded again, in the encoding it came in: the frame's size.
         encode(&message, &mut frame).expect("what was decoded encodes");
+        match &message {
+            Message::Pose(p) if p.linear_velocity.length() > 0.05 => {
+                progress.moving_poses.fetch_add(1, Ordering::Relaxed);
+            }
+            Message::Stats(_) => {
+                progress.stats.fetch_add(1, Ordering::Relaxed);
+            }
+            _ => {}
+        }
         messages.push((monotonic_now().as_nanos() as u64, frame.len(), message));
     }
     Read1 { messages }
@@ -86,9 +118,18 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
         resend: true,
         ..Subscribe::default()
     });
+    // Every reader reads until the full and the compact one have seen enough (events, not a
+    // time: a busy machine processes fewer frames a second).
+    let started = Instant::now();
+    let stop = Arc::new(AtomicBool::new(false));
+    let progress: Vec<Arc<Progress>> = (0..4).map(|_| Arc::default()).collect();
     let readers: Vec<_> = [full, compact, supports, extrapolating]
         .into_iter()
-        .map(|s| std::thread::spawn(move || read_for(s, RUN)))
+        .zip(&progress)
+        .map(|(s, progress)| {
+            let (stop, progress) = (Arc::clone(&stop), Arc::clone(progress));
+            std::thread::spawn(move || read_until(s, &stop, &progress))
+        })
         .collect();
 
     // A version-1 client: it can read the Hello (its layout is frozen) and sees version 3;
@@ -122,6 +163,18 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
         other => panic!("a version-1 client's last message: {other:?}"),
     }
 
+    while started.elapsed() < MIN_RUN || !(progress[0].enough() && progress[1].enough()) {
+        assert!(
+            started.elapsed() < HANG_GUARD,
+            "the readers did not see {ENOUGH_MOVING_POSES} moves and {ENOUGH_STATS} Stats \
+             within {HANG_GUARD:?}:\n{}",
+            daemon.log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stop.store(true, Ordering::Relaxed);
+    let run = started.elapsed();
+    eprintln!("read for {run:.1?}");
     let mut read: Vec<Read1> = readers
         .into_iter()
         .map(|r| r.join().expect("a reader"))
@@ -134,10 +187,10 @@ fn the_documented_claims_hold_against_the_daemon_on_the_demo_scene() {
     let compact_read = read.pop().expect("four readers");
     let full_read = read.pop().expect("four readers");
 
-    check_conversation_and_times(&full_read);
+    check_conversation_and_times(&full_read, run);
     let moving = check_moves_are_poses(&full_read);
     check_supports_and_closed_flags(&full_read);
-    check_stats(&full_read);
+    check_stats(&full_read, run);
     check_compact_against_full(&compact_read, &full_read, moving);
     check_kind_filter(&supports_read);
     check_bodies(&full_read, &compact_read, &supports_read);
@@ -225,7 +278,7 @@ fn check_extrapolation(extrapolating: &Read1, full: &Read1, cone: u64) {
 /// Hello, Session (both clocks now), Shapes, SnapshotDone; then per object: versions, shape
 /// time, pose time and last seen never go backwards, last seen is never before the pose time,
 /// and a Pose names the shape version the client holds.
-fn check_conversation_and_times(read: &Read1) {
+fn check_conversation_and_times(read: &Read1, run: Duration) {
     // The subscription read the Hello and checked its version.
     let kinds: Vec<&str> = read.messages.iter().map(|(_, _, m)| m.name()).collect();
     let (received_ns, _, session) = &read.messages[0];
@@ -233,13 +286,14 @@ fn check_conversation_and_times(read: &Read1) {
         panic!("the first message after Hello is {}, not Session", kinds[0]);
     };
     assert_eq!(session.options, Subscribe::default());
+    // The same clocks (not a latency: a reader may wait its turn on a busy machine).
     assert!(
-        received_ns.abs_diff(session.monotonic_ns) < 2_000_000_000,
+        received_ns.abs_diff(session.monotonic_ns) < 10_000_000_000,
         "Session's monotonic clock {} is not ours {received_ns}",
         session.monotonic_ns
     );
     assert!(
-        realtime_now_ns().abs_diff(session.realtime_ns) < RUN.as_nanos() as u64 + 2_000_000_000,
+        realtime_now_ns().abs_diff(session.realtime_ns) < run.as_nanos() as u64 + 10_000_000_000,
         "Session's wall clock is off"
     );
     let done = kinds
@@ -303,7 +357,7 @@ fn check_conversation_and_times(read: &Read1) {
             (version, shape_time, pose.pose_time_ns, pose.last_seen_ns),
         );
     }
-    assert!(updates > 50, "only {updates} updates in {RUN:?}");
+    assert!(updates > 50, "only {updates} updates in {run:?}");
 }
 
 /// Every object gets collision bodies (docs/protocol.md, "Body"): each follows a Shape of its
@@ -449,7 +503,7 @@ fn check_moves_are_poses(read: &Read1) -> u64 {
     assert_eq!(moving.len(), 1, "objects that crossed the table: {path:?}");
     let cone = moving[0];
     let (shapes, poses) = counts[&cone];
-    eprintln!("the cone (object {cone}): {shapes} shapes, {poses} poses in {RUN:?}");
+    eprintln!("the cone (object {cone}): {shapes} shapes, {poses} poses");
     assert!(poses >= 60, "only {poses} poses of the sliding cone");
     assert!(
         shapes * 3 <= poses,
@@ -525,7 +579,7 @@ fn check_supports_and_closed_flags(read: &Read1) {
 
 /// Stats: the latency window is stated, clocks advance, counters never go back, and the
 /// shapes and poses published (summed over subscribers) cover what this one read.
-fn check_stats(read: &Read1) {
+fn check_stats(read: &Read1, run: Duration) {
     let mut received = (0u64, 0u64);
     let mut previous: Option<(&Stats, (u64, u64))> = None;
     let mut seen = 0;
@@ -551,10 +605,7 @@ fn check_stats(read: &Read1) {
             _ => {}
         }
     }
-    assert!(
-        seen >= RUN.as_secs() as usize - 2,
-        "only {seen} Stats in {RUN:?}"
-    );
+    assert!(seen >= ENOUGH_STATS, "only {seen} Stats in {run:?}");
     let (last, _) = previous.expect("Stats");
     assert!(last.clients_connected >= 3, "{last:?}");
     assert!(

@@ -174,17 +174,11 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh, FormatError> {
 /// Writes a mesh as binary little-endian `.ply` or as text `.obj`, by extension.
 pub fn write_mesh(path: &Path, mesh: &TriMesh) -> Result<(), FormatError> {
     let name = path.display().to_string();
+    check_mesh_path(path)?;
     let write: fn(&mut BufWriter<File>, &TriMesh) -> std::io::Result<()> =
         match extension(path).as_str() {
-            "ply" => ply::write_mesh,
             "obj" => obj::write,
-            _ => {
-                return Err(FormatError::UnsupportedExtension {
-                    name,
-                    what: "meshes",
-                    supported: MESH_WRITE_EXTENSIONS,
-                })
-            }
+            _ => ply::write_mesh,
         };
     if let Some((triangle, vertex)) = mesh.first_bad_index() {
         return Err(FormatError::Unwritable {
@@ -230,6 +224,19 @@ pub fn write_cloud(path: &Path, cloud: &PointCloud) -> Result<(), FormatError> {
 }
 
 /// The extension in lower case, or "" when there is none.
+/// Whether [`write_mesh`] can write `path` (by its extension): a command can say so before it
+/// does the work whose result would go there.
+pub fn check_mesh_path(path: &Path) -> Result<(), FormatError> {
+    match extension(path).as_str() {
+        "ply" | "obj" => Ok(()),
+        _ => Err(FormatError::UnsupportedExtension {
+            name: path.display().to_string(),
+            what: "meshes",
+            supported: MESH_WRITE_EXTENSIONS,
+        }),
+    }
+}
+
 fn extension(path: &Path) -> String {
     path.extension()
         .and_then(|e| e.to_str())

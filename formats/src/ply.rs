@@ -558,6 +558,17 @@ type BytesReader<'a> = Reader<Cursor<&'a [u8]>>;
 
 /// The header, and a reader at the first byte after it.
 fn read_header<'a>(bytes: &'a [u8], name: &str) -> Result<(Header, BytesReader<'a>), FormatError> {
+    // Said plainly before the parser's own words (an empty file's "Unexpected end of file
+    // while reading magic number", random bytes' "stream did not contain valid UTF-8").
+    if bytes.is_empty() {
+        return Err(FormatError::malformed(name, "the file is empty"));
+    }
+    if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n")) {
+        return Err(FormatError::malformed(
+            name,
+            "not a PLY file: it does not begin with the line `ply`",
+        ));
+    }
     let mut reader = Reader::new(Cursor::new(bytes));
     let header = Parser::<Ignored>::new()
         .read_header(&mut reader)
@@ -834,6 +845,22 @@ mod tests {
         let mesh = parse_mesh(ASCII_QUAD.as_bytes(), "quad.ply").unwrap();
         assert_eq!(mesh.vertices.len(), 4);
         assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+    }
+
+    /// An empty file and one of random bytes are said to be so, in words, not in the parser's.
+    #[test]
+    fn empty_and_random_files_are_named_plainly() {
+        let empty = parse_cloud(b"", "e.ply").unwrap_err().to_string();
+        assert!(
+            empty.contains("e.ply") && empty.contains("empty"),
+            "{empty}"
+        );
+        let random: Vec<u8> = (0..512u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 7) as u8)
+            .collect();
+        let junk = parse_mesh(&random, "r.ply").unwrap_err().to_string();
+        assert!(junk.contains("not a PLY file"), "{junk}");
+        assert!(!junk.contains("UTF-8"), "{junk}");
     }
 
     #[test]

@@ -15,7 +15,9 @@ use tacmesh_source::TriMesh;
 
 use crate::{AllowedPeers, PublishError, Publisher, PublisherConfig};
 
-const WAIT: Duration = Duration::from_secs(5);
+/// How long a test waits for a message or an event before it fails: a hang guard, generous
+/// for a busy machine, never a bound on speed.
+const WAIT: Duration = Duration::from_secs(30);
 
 fn socket_in(dir: &tempfile::TempDir) -> PathBuf {
     dir.path().join("tacmesh.sock")
@@ -238,7 +240,12 @@ fn update_reaches_two_clients() {
 fn stalled_client_does_not_delay_another() {
     let dir = tempfile::tempdir().unwrap();
     let path = socket_in(&dir);
-    let publisher = publisher(&path);
+    // A write timeout longer than the test: the stalled client is still held, its socket
+    // buffer full, when the reader has had everything (a publisher that waited on it would
+    // never get there).
+    let mut config = PublisherConfig::new(&path);
+    config.server_name = "tacmesh-test".into();
+    let publisher = Publisher::bind_with_write_timeout(config, Duration::from_secs(600)).unwrap();
     let _stalled = UnixStream::connect(&path).unwrap(); // never reads
     let mut reader = TestClient::connect(&path);
     reader.hello();
@@ -266,12 +273,9 @@ fn stalled_client_does_not_delay_another() {
     }
     let (ids, elapsed) = receive.join().unwrap();
     assert_eq!(ids, (0..200).collect::<Vec<_>>());
-    assert!(elapsed < WAIT, "the reader took {elapsed:?}");
-    assert!(
-        slowest_call < Duration::from_millis(250),
-        "a publish call took {slowest_call:?}"
-    );
+    eprintln!("the reader took {elapsed:?}; the slowest publish call {slowest_call:?}");
     assert_eq!(publisher.counters().clients_dropped, 0);
+    assert_eq!(publisher.counters().clients_connected, 2);
 }
 
 #[test]
@@ -687,8 +691,9 @@ fn shutdown_sends_goodbye_and_removes_the_socket() {
     assert_eq!(client.shape().object_id(), 1);
     let start = Instant::now();
     publisher.shutdown("SIGTERM received");
+    // A hang guard: the stalled client cannot hold the shutdown past its grace for long.
     assert!(
-        start.elapsed() < crate::GOODBYE_GRACE + Duration::from_secs(1),
+        start.elapsed() < crate::GOODBYE_GRACE + WAIT,
         "shutdown took {:?}",
         start.elapsed()
     );

@@ -8,8 +8,12 @@
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
+import pwd
 import socket
+import struct
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
@@ -56,6 +60,120 @@ class Refused(ConnectionError):
 
 class VersionMismatch(ConnectionError):
     """The daemon speaks a protocol version this client does not read."""
+
+
+#: The system user the daemon's systemd service runs as (systemd/tacmesh.sysusers).
+SERVICE_USER = "tacmesh"
+
+
+class UntrustedServer(ConnectionError):
+    """The socket is served by a process of a user this client does not trust: not its own
+    effective user, not root, not the ``tacmesh`` service user, and not one of the
+    ``trust_uids`` it was given. Another local user may have bound the path first to feed it
+    forged meshes: the connection is closed before anything is read from it, and it is not
+    retried (not even with ``reconnect``). ``path``, ``uid``, ``user`` (None if the uid has no
+    name) and ``pid`` say who serves it."""
+
+    def __init__(self, path: str | Path, credentials: PeerCredentials) -> None:
+        self.path = Path(path)
+        self.credentials = credentials
+        self.uid = credentials.uid
+        self.pid = credentials.pid
+        self.user = user_name(credentials.uid)
+        who = f"uid {self.uid}" + (f" ({self.user})" if self.user is not None else "")
+        super().__init__(
+            f"the socket {self.path} is served by {who}, pid {self.pid}, not by you "
+            f"(uid {os.geteuid()}), root or the {SERVICE_USER} service user: another local "
+            f"user may be impersonating the daemon; pass trust_uids=[{self.uid}] if you meant "
+            "to connect to it"
+        )
+
+    def __reduce__(self) -> tuple[type[UntrustedServer], tuple[Path, PeerCredentials]]:
+        # Pickled (to another process) by what it was made of, not by its message.
+        return type(self), (self.path, self.credentials)
+
+
+class PeerCredentials(NamedTuple):
+    """Who serves a Unix socket (``SO_PEERCRED``): the process, user and group that were
+    listening on it."""
+
+    pid: int
+    uid: int
+    gid: int
+
+
+def server_credentials(sock: socket.socket) -> PeerCredentials:
+    """The credentials of the server at the other end of a connected Unix socket: the process
+    that listens on it, with the user and group it had when it began listening (Linux's
+    ``SO_PEERCRED``)."""
+    raw = sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+    pid, uid, gid = struct.unpack("3i", raw)
+    return PeerCredentials(pid, uid, gid)
+
+
+def user_name(uid: int) -> str | None:
+    """The name of the user ``uid``, None if it has none."""
+    try:
+        return pwd.getpwuid(uid).pw_name
+    except KeyError:
+        return None
+
+
+def trusted_uids(trust_uids: Iterable[int] = ()) -> frozenset[int]:
+    """The users whose server a client takes for the daemon: the client's own effective uid,
+    root (0), the ``tacmesh`` service user if this host has one, and ``trust_uids``."""
+    trusted = {os.geteuid(), 0, *(int(uid) for uid in trust_uids)}
+    try:
+        trusted.add(pwd.getpwnam(SERVICE_USER).pw_uid)
+    except KeyError:
+        pass  # no service user here: the daemon runs as its user (or root)
+    return frozenset(trusted)
+
+
+def check_server(
+    path: str | Path, credentials: PeerCredentials, trust_uids: Iterable[int] = ()
+) -> None:
+    """Raises :class:`UntrustedServer` unless the user serving the socket at ``path``
+    (``credentials``, see :func:`server_credentials`) is one of :func:`trusted_uids`."""
+    if credentials.uid not in trusted_uids(trust_uids):
+        raise UntrustedServer(path, credentials)
+
+
+#: What to do when there is no daemon at a socket's path.
+START_ADVICE = "is the daemon running? (`tacmesh run`, or `systemctl status tacmesh`)"
+
+
+def connect(
+    path: str | Path, *, timeout_s: float | None = None, trust_uids: Iterable[int] = ()
+) -> socket.socket:
+    """A connection to the daemon's socket at ``path``, once its server is found to be a
+    trusted user's (:func:`check_server`: else :class:`UntrustedServer`, the socket closed).
+    ``timeout_s`` is the socket's timeout (None: blocking).
+
+    No socket at ``path`` raises :class:`FileNotFoundError`, a socket nobody listens on (a
+    daemon that stopped without removing it) :class:`ConnectionRefusedError`, each saying so
+    and how to start the daemon; any other failure is the :class:`OSError` of ``connect``.
+    """
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        sock.settimeout(timeout_s)
+        try:
+            sock.connect(str(path))
+        except FileNotFoundError:
+            raise FileNotFoundError(
+                errno.ENOENT, f"{path}: no such socket: {START_ADVICE}"
+            ) from None
+        except ConnectionRefusedError:
+            raise ConnectionRefusedError(
+                errno.ECONNREFUSED,
+                f"{path}: nothing listens on this socket (a daemon that stopped without "
+                f"removing it?): {START_ADVICE}",
+            ) from None
+        check_server(path, server_credentials(sock), trust_uids)
+    except BaseException:
+        sock.close()
+        raise
+    return sock
 
 
 class Mesh(NamedTuple):
@@ -371,11 +489,18 @@ class Subscriber:
     ``scene`` is the :class:`Scene` of everything yielded so far. :meth:`subscribe` changes the
     options (by default with a fresh snapshot), :meth:`resend` asks for a fresh snapshot.
 
+    Every connection is checked to be served by a trusted user (:func:`connect`): this
+    client's own, root, the ``tacmesh`` service user, or one of ``trust_uids``. Another raises
+    :class:`UntrustedServer`, with or without ``reconnect``: it is not a daemon that went away.
+
     With ``reconnect`` (the default), a lost connection or the daemon's Goodbye is logged (the
     ``tacmesh`` logger) and followed by new attempts with exponential backoff (``backoff_s``
     doubling up to ``max_backoff_s``); the next connection starts again with its Hello and a
-    snapshot, and the options are sent again. Without it, iteration ends after a Goodbye or
-    when the connection closes. A frame that breaks the protocol raises a
+    snapshot, and the options are sent again. No daemon yet at the first attempt (no socket at
+    ``path``, or nobody listening on it) is logged once, as waiting for one, and the connection
+    when it comes. Without ``reconnect``, iteration ends after a Goodbye or when the connection
+    closes, and no daemon at the first attempt raises :class:`FileNotFoundError` (or
+    :class:`ConnectionRefusedError`) saying so. A frame that breaks the protocol raises a
     :class:`~tacmesh.wire.WireError` either way: a daemon sending garbage is not retried.
 
     ``timeout_s`` bounds each wait for data (None: wait for ever); a timeout raises
@@ -396,8 +521,12 @@ class Subscriber:
         backoff_s: float = 0.1,
         max_backoff_s: float = 5.0,
         send_subscribe: bool = True,
+        trust_uids: Iterable[int] = (),
     ) -> None:
         self.path = Path(path)
+        #: Users trusted to serve the socket besides this client's own, root and the
+        #: ``tacmesh`` service user.
+        self.trust_uids = frozenset(int(uid) for uid in trust_uids)
         #: The options asked for (``resend`` False: it is set on each Subscribe as needed).
         self.options = options_of(
             encoding=encoding,
@@ -433,6 +562,8 @@ class Subscriber:
         # Sessions to come before the one that answers this client's latest options.
         self._sessions_to_skip = 0
         self._awaiting: Subscribe | None = None
+        # Why the daemon is not there (logged once), from the first failed attempt to the next
+        # connection.
         self._lost: str | None = None
 
     # -- changing what is sent ----------------------------------------------------------------
@@ -493,22 +624,21 @@ class Subscriber:
                 if self._sock is None:
                     self._connect()
                 message = self._read_message()
-            except (TimeoutError, Refused, VersionMismatch):
+            except (TimeoutError, Refused, VersionMismatch, UntrustedServer):
                 self.close()
                 raise
             except (OSError, EOFError) as error:
                 # Not there yet, gone, or restarting: worth waiting for, unless told not to.
                 self.close()
+                no_daemon = isinstance(error, (FileNotFoundError, ConnectionRefusedError))
                 if not self.reconnect:
                     self._finished = True
+                    if no_daemon and self.connections == 0:
+                        raise  # the first attempt: say why there is nothing to read
                     raise StopIteration from None
                 if self._lost is None:
                     self._lost = str(error) or type(error).__name__
-                    log.warning(
-                        "tacmesh: the daemon at %s went away (%s); reconnecting",
-                        self.path,
-                        self._lost,
-                    )
+                    self._log_lost(error, no_daemon)
                 time.sleep(delay)
                 delay = min(2 * delay, self.max_backoff_s)
                 continue
@@ -528,23 +658,39 @@ class Subscriber:
                     self._finished = True
             return message
 
+    def _log_lost(self, error: BaseException, no_daemon: bool) -> None:
+        """The one warning of a wait for the daemon: none there yet, or gone."""
+        if self.connections > 0:
+            log.warning(
+                "tacmesh: the daemon at %s went away (%s); reconnecting", self.path, self._lost
+            )
+        elif no_daemon:
+            what = "no such socket" if isinstance(error, FileNotFoundError) else "nobody listens"
+            log.warning(
+                "tacmesh: no daemon at %s yet (%s); waiting for one to start (`tacmesh run`, "
+                "or `systemctl status tacmesh`)",
+                self.path,
+                what,
+            )
+        else:
+            log.warning(
+                "tacmesh: cannot connect to the daemon at %s (%s); retrying",
+                self.path,
+                self._lost,
+            )
+
     def _connect(self) -> None:
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            sock.settimeout(self.timeout_s)
-            sock.connect(str(self.path))
-        except BaseException:
-            sock.close()
-            raise
+        sock = connect(self.path, timeout_s=self.timeout_s, trust_uids=self.trust_uids)
         self._sock = sock
         self._decoder = FrameDecoder()
         self._expect_hello = True
         self._awaiting = None
         self._sessions_to_skip = 0
-        self.connections += 1
         if self._lost is not None:
-            log.warning("tacmesh: connected to the daemon at %s again", self.path)
+            again = " again" if self.connections > 0 else ""
+            log.warning("tacmesh: connected to the daemon at %s%s", self.path, again)
             self._lost = None
+        self.connections += 1
 
     def _receive(self) -> Message:
         assert self._sock is not None

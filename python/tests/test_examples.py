@@ -1,10 +1,17 @@
 """The examples in python/examples: on a made-up scene (a scripted fake daemon), and against the
-real daemon on the simulated scene."""
+real daemon on the simulated scene.
+
+Each needs its optional package (``mujoco``; ``rerun-sdk``, with its ``rerun`` command): without
+it the example's tests are skipped, naming the package, before the daemon is started for them.
+"""
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import math
+import os
+import shutil
 import subprocess
 import sys
 import time
@@ -23,6 +30,39 @@ from test_daemon import Daemon, daemon  # noqa: F401  (the fixture)
 from test_subscriber import FakeDaemon, Peer, wait_for_close
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def missing(module: str, package: str) -> str | None:
+    """Why the tests that import ``module`` cannot run (``package`` is not installed), or None."""
+    try:
+        importlib.import_module(module)
+    except ImportError as error:
+        return f"the {package} package is not installed (pip install {package}): {error}"
+    return None
+
+
+def rerun_command() -> Path | None:
+    """rerun-sdk's ``rerun`` command: beside this Python (a virtual environment's), or on PATH."""
+    beside = Path(sys.executable).parent / "rerun"
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return beside
+    found = shutil.which("rerun")
+    return Path(found) if found is not None else None
+
+
+def skip_without(reason: str | None) -> pytest.MarkDecorator:
+    return pytest.mark.skipif(reason is not None, reason=reason or "")
+
+
+WITHOUT_MUJOCO = missing("mujoco", "mujoco")
+WITHOUT_RERUN = missing("rerun", "rerun-sdk") or (
+    None
+    if rerun_command() is not None
+    else "rerun-sdk's `rerun` command (to read the recording) is neither beside "
+    f"{sys.executable} nor on PATH"
+)
+needs_mujoco = skip_without(WITHOUT_MUJOCO)
+needs_rerun = skip_without(WITHOUT_RERUN)
 
 
 def example(name: str) -> ModuleType:
@@ -112,6 +152,7 @@ def made_up_scene() -> Scene:
     return scene
 
 
+@needs_mujoco
 def test_mujoco_made_up_the_probe_rests_on_the_tallest_box() -> None:
     mujoco_scene = example("mujoco_scene")
     scene = made_up_scene()
@@ -121,6 +162,7 @@ def test_mujoco_made_up_the_probe_rests_on_the_tallest_box() -> None:
     assert mujoco_scene.model_of(scene).nmesh == 3
 
 
+@needs_mujoco
 def test_mujoco_made_up_a_pose_moves_a_body_without_a_rebuild() -> None:
     mujoco_scene = example("mujoco_scene")
     scene = made_up_scene()
@@ -149,6 +191,7 @@ def test_mujoco_made_up_a_pose_moves_a_body_without_a_rebuild() -> None:
     assert live.update(scene) is True and live.rebuilds == 2
 
 
+@needs_rerun
 def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(tmp_path: Path) -> None:
     import rerun as rr
 
@@ -176,8 +219,10 @@ def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(tmp_path: 
 
 def rrd_print(recording: Path) -> str:
     """Rerun's own reading of a recording."""
+    command = rerun_command()
+    assert command is not None
     return subprocess.run(
-        [str(Path(sys.executable).parent / "rerun"), "rrd", "print", str(recording)],
+        [str(command), "rrd", "print", str(recording)],
         capture_output=True,
         text=True,
         check=True,
@@ -206,6 +251,7 @@ def scene_after(daemon: Daemon, seconds: float) -> Scene:
     return subscriber.scene
 
 
+@needs_mujoco
 def test_mujoco_a_probe_dropped_on_an_object_rests_on_its_top(daemon: Daemon) -> None:
     mujoco_scene = example("mujoco_scene")
     scene = scene_after(daemon, 3.0)
@@ -221,6 +267,7 @@ def test_mujoco_a_probe_dropped_on_an_object_rests_on_its_top(daemon: Daemon) ->
     assert model.nmesh == objects >= 3
 
 
+@needs_mujoco
 def test_mujoco_the_live_model_follows_poses_without_rebuilding(daemon: Daemon) -> None:
     mujoco_scene = example("mujoco_scene")
     scene, live = mujoco_scene.follow(str(daemon.socket_path), 4.0)
@@ -232,6 +279,7 @@ def test_mujoco_the_live_model_follows_poses_without_rebuilding(daemon: Daemon) 
             np.testing.assert_allclose(position, o.pose.translation, atol=1e-6)
 
 
+@needs_rerun
 def test_rerun_the_stream_is_logged_as_meshes_transforms_and_scalars(
     daemon: Daemon, tmp_path: Path
 ) -> None:
@@ -250,3 +298,38 @@ def test_rerun_the_stream_is_logged_as_meshes_transforms_and_scalars(
     assert any(m.startswith("/supports/") for m in meshes), printed[-3000:]
     assert any(m.startswith("/objects/") for m in entities_with(printed, "Transform3D:"))
     assert "/stats/frames_in" in printed
+
+
+# ---- without the optional packages ---------------------------------------------------------
+
+
+def test_without_mujoco_or_rerun_the_examples_tests_are_skipped_naming_the_package(
+    tmp_path: Path,
+) -> None:
+    # Modules of the same names, first on the path, that fail to import as a missing one does.
+    hidden = tmp_path / "hidden"
+    hidden.mkdir()
+    for module in ("mujoco", "rerun"):
+        (hidden / f"{module}.py").write_text(
+            f'raise ModuleNotFoundError("No module named {module!r}", name={module!r})\n'
+        )
+    path = os.pathsep.join([str(hidden), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    done = subprocess.run(
+        [
+            sys.executable,
+            *("-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider"),
+            *("-k", "not skipped_naming_the_package"),  # all but this test
+            str(Path(__file__)),
+        ],
+        cwd=Path(__file__).parent,
+        env={**os.environ, "PYTHONPATH": path},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    output = done.stdout + done.stderr
+    assert done.returncode == 0, output
+    assert "6 skipped" in output and "passed" not in output, output
+    assert "the mujoco package is not installed (pip install mujoco)" in output, output
+    assert "the rerun-sdk package is not installed (pip install rerun-sdk)" in output, output

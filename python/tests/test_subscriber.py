@@ -1,14 +1,22 @@
 """The Subscriber against a scripted fake daemon: the Hello check, the Subscribe it sends and
-the snapshot it takes the scene from, bodies, changing options, reconnection."""
+the snapshot it takes the scene from, bodies, changing options, reconnection, no daemon yet; and
+who serves the socket (SO_PEERCRED), against a server of another user when run as root."""
 
 from __future__ import annotations
 
 import logging
+import os
+import pickle
+import pwd
+import shutil
+import signal
 import socket
+import tempfile
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -32,9 +40,14 @@ from tacmesh import (
     Stats,
     Subscribe,
     Subscriber,
+    UntrustedServer,
     VersionMismatch,
     WireError,
+    connect,
+    trusted_uids,
 )
+from tacmesh import subscriber as subscriber_module
+from tacmesh.subscriber import PeerCredentials, check_server, server_credentials
 from tacmesh.wire import (
     FIRST_SUPPORT_ID,
     SHAPE_SUPPORT,
@@ -381,6 +394,8 @@ def test_a_lost_daemon_is_reconnected_to_and_the_options_sent_again(
     assert set(sub.scene.objects) == {2} and sub.scene.complete
     assert "reconnecting" in caplog.text and "Goodbye (restarting)" in caplog.text
     assert "inside a frame" in caplog.text
+    assert f"connected to the daemon at {sock} again" in caplog.text
+    assert "no daemon" not in caplog.text
 
 
 def test_without_reconnect_the_end_of_the_connection_ends_iteration(sock: Path) -> None:
@@ -405,3 +420,237 @@ def test_options_are_checked() -> None:
         with pytest.raises(ValueError, match="max_rate_hz"):
             Subscriber("/nonexistent", max_rate_hz=rate)
     assert Subscriber("/nonexistent", max_rate_hz=0.01).options.max_rate_hz == 0.01
+
+
+# ---- no daemon at the path ------------------------------------------------------------------
+
+
+def test_without_reconnect_no_socket_is_an_error_saying_so(tmp_path: Path) -> None:
+    path = tmp_path / "never.sock"
+    with pytest.raises(FileNotFoundError, match="no such socket") as raised:
+        next(iter(Subscriber(path, reconnect=False, timeout_s=5)))
+    message = str(raised.value)
+    assert str(path) in message and "is the daemon running?" in message, message
+    assert "tacmesh run" in message and "systemctl status tacmesh" in message, message
+
+
+def test_without_reconnect_a_socket_nobody_listens_on_is_an_error_saying_so(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "stale.sock"
+    stale = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    stale.bind(str(path))  # bound, not listening: a daemon that died without removing it
+    try:
+        with pytest.raises(ConnectionRefusedError, match="nothing listens") as raised:
+            next(iter(Subscriber(path, reconnect=False, timeout_s=5)))
+    finally:
+        stale.close()
+    assert str(path) in str(raised.value) and "tacmesh run" in str(raised.value)
+
+
+def test_with_reconnect_no_daemon_yet_is_one_warning_then_the_connection(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "later.sock"
+    started: list[FakeDaemon] = []
+    # The daemon comes 0.4 s later: about six attempts in between (backoff from 0.01 s).
+    timer = threading.Timer(
+        0.4, lambda: started.append(FakeDaemon(path, lambda peer: peer.send(HELLO)))
+    )
+    caplog.set_level(logging.INFO, logger="tacmesh")
+    timer.start()
+    try:
+        with Subscriber(path, timeout_s=5, backoff_s=0.01) as sub:
+            assert next(iter(sub)) == HELLO
+    finally:
+        timer.join()
+    started[0].join()
+    lines = [r.getMessage() for r in caplog.records if r.name == "tacmesh"]
+    assert lines == [
+        f"tacmesh: no daemon at {path} yet (no such socket); waiting for one to start "
+        "(`tacmesh run`, or `systemctl status tacmesh`)",
+        f"tacmesh: connected to the daemon at {path}",
+    ], lines
+
+
+# ---- who serves the socket ------------------------------------------------------------------
+
+T = TypeVar("T")
+
+
+def within(seconds: float, call: Callable[[], T]) -> T:
+    """``call()``'s result or exception, failing (not hanging) if it takes over ``seconds``."""
+    outcome: list[T] = []
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            outcome.append(call())
+        except BaseException as error:  # re-raised below
+            errors.append(error)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    assert not thread.is_alive(), f"still running after {seconds} s (retrying for ever?)"
+    if errors:
+        raise errors[0]
+    return outcome[0]
+
+
+def test_the_trusted_users_are_me_root_the_service_user_and_those_given(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    service = pwd.struct_passwd(("tacmesh", "x", 990, 990, "", "/", "/usr/sbin/nologin"))
+    mallory = pwd.struct_passwd(("mallory", "x", 1234, 1234, "", "/home/m", "/bin/sh"))
+
+    def getpwnam(name: str) -> pwd.struct_passwd:
+        if name == "tacmesh":
+            return service
+        raise KeyError(name)
+
+    def getpwuid(uid: int) -> pwd.struct_passwd:
+        if uid == 1234:
+            return mallory
+        raise KeyError(uid)
+
+    monkeypatch.setattr(os, "geteuid", lambda: 1000)
+    monkeypatch.setattr(pwd, "getpwnam", getpwnam)
+    monkeypatch.setattr(pwd, "getpwuid", getpwuid)
+    assert trusted_uids() == {1000, 0, 990}
+    assert trusted_uids([1234, 5678]) == {1000, 0, 990, 1234, 5678}
+    for uid in (1000, 0, 990):
+        check_server("/run/tacmesh/tacmesh.sock", PeerCredentials(1, uid, uid))
+    check_server("/x.sock", PeerCredentials(1, 1234, 1234), trust_uids=[1234])
+    with pytest.raises(UntrustedServer) as raised:
+        check_server("/run/tacmesh/tacmesh.sock", PeerCredentials(4242, 1234, 1234))
+    error = raised.value
+    assert isinstance(error, ConnectionError)
+    assert (error.uid, error.user, error.pid) == (1234, "mallory", 4242)
+    assert str(pickle.loads(pickle.dumps(error))) == str(error)
+    assert str(error) == (
+        "the socket /run/tacmesh/tacmesh.sock is served by uid 1234 (mallory), pid 4242, not by "
+        "you (uid 1000), root or the tacmesh service user: another local user may be "
+        "impersonating the daemon; pass trust_uids=[1234] if you meant to connect to it"
+    )
+    # A uid without a name, and a host without the service user.
+    with pytest.raises(UntrustedServer, match=r"served by uid 5678, pid 7, not by you"):
+        check_server("/x.sock", PeerCredentials(7, 5678, 5678))
+    monkeypatch.setattr(pwd, "getpwnam", lambda name: getpwnam("not " + name))
+    assert trusted_uids() == {1000, 0}
+    with pytest.raises(UntrustedServer):
+        check_server("/x.sock", PeerCredentials(1, 990, 990))
+
+
+def test_an_untrusted_server_is_not_retried_with_reconnect(
+    sock: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The fake daemon runs as this user: make it look like someone else's.
+    monkeypatch.setattr(
+        subscriber_module, "server_credentials", lambda _: PeerCredentials(4242, 54321, 54321)
+    )
+    daemon = FakeDaemon(sock, wait_for_close)
+    sub = Subscriber(sock, timeout_s=5, backoff_s=0.01)
+    with pytest.raises(UntrustedServer, match=r"uid 54321.*trust_uids=\[54321\]"):
+        within(10, lambda: next(iter(sub)))
+    assert sub.connections == 0 and sub._sock is None
+    daemon.join()
+    # Trusted, it is the daemon.
+    trusted = sock.with_name("trusted.sock")
+    daemon = FakeDaemon(trusted, lambda peer: peer.send(HELLO))
+    with Subscriber(trusted, reconnect=False, timeout_s=5, trust_uids=[54321]) as sub:
+        assert next(iter(sub)) == HELLO
+    daemon.join()
+
+
+NOBODY = 65534
+
+
+class ServerOfAnotherUser:
+    """A process that serves a Hello on a Unix socket as ``uid`` (root forks it and it drops to
+    that user before it listens, so that SO_PEERCRED names it), in a directory of its own."""
+
+    def __init__(self, uid: int) -> None:
+        self.directory = Path(tempfile.mkdtemp(prefix="tacmesh-peercred-"))
+        # Only that user may write there (root still may, as root).
+        os.chown(self.directory, uid, uid)
+        os.chmod(self.directory, 0o755)
+        self.path = self.directory / "tacmesh.sock"
+        hello = encode(HELLO)
+        ready, told = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:  # the child: system calls only, and never back into pytest
+            try:
+                os.close(ready)
+                os.setgroups([])
+                os.setgid(uid)
+                os.setuid(uid)
+                listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                listener.bind(str(self.path))
+                listener.listen(4)
+                os.write(told, b"1")
+                while True:
+                    connection, _ = listener.accept()
+                    connection.settimeout(5)
+                    try:
+                        connection.sendall(hello)
+                        while connection.recv(65536):
+                            pass
+                    except OSError:
+                        pass
+                    connection.close()
+            finally:
+                os._exit(1)
+        os.close(told)
+        try:
+            assert os.read(ready, 1) == b"1", f"the server as uid {uid} did not start"
+        except BaseException:
+            self.stop()
+            raise
+        finally:
+            os.close(ready)
+
+    def stop(self) -> None:
+        os.kill(self.pid, signal.SIGKILL)
+        os.waitpid(self.pid, 0)
+        shutil.rmtree(self.directory, ignore_errors=True)
+
+
+@pytest.mark.skipif(
+    os.geteuid() != 0,
+    reason="needs root: it serves the socket as another user (nobody, uid 65534), and only root "
+    "can become another user",
+)
+def test_a_server_of_another_user_is_refused_unless_trusted() -> None:
+    server = ServerOfAnotherUser(NOBODY)
+    try:
+        path = server.path
+        with pytest.raises(UntrustedServer) as raised:
+            next(iter(Subscriber(path, reconnect=False, timeout_s=5)))
+        error = raised.value
+        assert (error.uid, error.pid, error.path) == (NOBODY, server.pid, path)
+        name = subscriber_module.user_name(NOBODY)
+        who = f"uid {NOBODY}" + (f" ({name})" if name is not None else "")
+        message = str(error)
+        assert f"the socket {path} is served by {who}, pid {server.pid}" in message, message
+        assert f"pass trust_uids=[{NOBODY}]" in message, message
+        # With reconnect too: raised, not retried.
+        with pytest.raises(UntrustedServer):
+            within(10, lambda: next(iter(Subscriber(path, timeout_s=5, backoff_s=0.01))))
+        with pytest.raises(UntrustedServer):
+            connect(path, timeout_s=5)
+        # Trusted, it is read.
+        with Subscriber(path, reconnect=False, timeout_s=5, trust_uids=[NOBODY]) as sub:
+            assert next(iter(sub)) == HELLO
+        with connect(path, timeout_s=5, trust_uids=[NOBODY]) as connection:
+            assert server_credentials(connection) == (server.pid, NOBODY, NOBODY)
+    finally:
+        server.stop()
+
+
+def test_a_server_of_my_own_user_is_trusted(sock: Path) -> None:
+    daemon = FakeDaemon(sock, wait_for_close)
+    with connect(sock, timeout_s=5) as connection:
+        credentials = server_credentials(connection)
+        assert credentials.uid == os.geteuid() and credentials.pid == os.getpid()
+    daemon.join()

@@ -133,6 +133,10 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     } else {
         NonFinite::Drop
     };
+    if !args.objects {
+        // Before the work whose result it would take.
+        tacmesh::formats::check_mesh_path(&args.output).context("the output mesh")?;
+    }
     let reading = std::time::Instant::now();
     let mut file = read_cloud_file(&args.cloud, non_finite).context("reading the point cloud")?;
     let read_ms = reading.elapsed().as_secs_f64() * 1e3;

@@ -68,6 +68,23 @@ pub struct RunArgs {
     duration_s: Option<f64>,
 }
 
+/// How to run this binary again from a shell: `tacmesh` when that is what `PATH` finds, else
+/// its full path (after `cargo run`, `tacmesh` may be another build or none at all).
+fn this_command() -> String {
+    let Ok(me) = std::env::current_exe().and_then(|p| p.canonicalize()) else {
+        return "tacmesh".to_owned();
+    };
+    let on_path = std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|dir| dir.join("tacmesh"))
+            .find(|candidate| candidate.is_file())
+    });
+    match on_path.and_then(|p| p.canonicalize().ok()) {
+        Some(found) if found == me => "tacmesh".to_owned(),
+        _ => me.display().to_string(),
+    }
+}
+
 /// The longest `--duration-s`: a year.
 const MAX_DURATION_S: f64 = 365.0 * 24.0 * 3600.0;
 
@@ -125,8 +142,8 @@ pub fn run(args: RunArgs, verbose: u8) -> anyhow::Result<()> {
 
     let daemon = Daemon::start(config).context("tacmesh run cannot start")?;
     tacmesh::log_sink::eprint_line(&format!(
-        "tacmesh: serving meshes on {}\ntacmesh: watch them with: tacmesh subscribe --socket {}",
-        daemon.socket_path().display(),
+        "tacmesh: watch them with: {} subscribe --socket {}",
+        this_command(),
         daemon.socket_path().display()
     ));
     daemon.run_until_stopped(&stop);

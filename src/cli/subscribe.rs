@@ -243,11 +243,23 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
         warned: Default::default(),
         held_still: Default::default(),
     });
+    // With options of its own, the daemon's first snapshot (under the default options, sent
+    // before it read them) is not what was asked for: everything up to the Session answering
+    // the Subscribe is skipped, so that filtered-out objects are neither printed, counted nor
+    // written.
+    let mut awaiting_answer = args.zenoh.is_none() && args.options().is_some();
     loop {
         if args.count.is_some_and(|n| updates >= n) {
             return Ok(());
         }
         let message = subscription.next_message()?;
+        if awaiting_answer {
+            match &message {
+                Message::Session(session) if session.options.resend => awaiting_answer = false,
+                Message::Goodbye { .. } => {}
+                _ => continue,
+            }
+        }
         let previous_pose = match &message {
             Message::Pose(pose) => scene.get(pose.object_id).map(|object| object.pose),
             _ => None,

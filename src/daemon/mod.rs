@@ -225,10 +225,7 @@ impl Daemon {
                 tracing::info!("reading {}", source.name());
             }
         }
-        tracing::info!(
-            "subscribe with: tacmesh subscribe --socket {}",
-            publisher.socket_path().display()
-        );
+        tracing::info!("serving meshes on {}", publisher.socket_path().display());
         let shared = Arc::new(Shared {
             ring: FrameRing::new(config.pipeline.ring_capacity),
             config,

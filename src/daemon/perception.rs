@@ -45,6 +45,8 @@ struct Segmenting {
     /// instead of searching anew.
     plane_hints: Vec<SupportPlane>,
     malformed_logged: bool,
+    /// A frame with no usable depth was explained in the log (once until one has some).
+    empty_frame_logged: bool,
     /// The end of every stream was passed on (once).
     end_sent: bool,
 }
@@ -82,6 +84,7 @@ impl Perception {
                 segment: SegmentConfig::live(),
                 plane_hints: Vec::new(),
                 malformed_logged: false,
+                empty_frame_logged: false,
                 end_sent: false,
             },
             fusing: Fusing {
@@ -192,6 +195,30 @@ impl Fusing {
     }
 }
 
+/// Why a depth frame gave no point, for an operator: no reading at all, or every reading
+/// beyond the range (most often a depth scale in other units: TUM RGB-D's 1/5000 taken for
+/// millimetres puts a 1 m wall at 5 m).
+fn why_no_depth(depth_m: &[f32], max_range_m: f32) -> String {
+    let mut beyond: Vec<f32> = depth_m
+        .iter()
+        .copied()
+        .filter(|&z| z.is_finite() && z > max_range_m)
+        .collect();
+    if beyond.is_empty() {
+        return "a depth frame has no reading at all (every pixel is 0 or not a number): is the \
+                camera covered, too close, or not sending depth?"
+            .to_owned();
+    }
+    let middle = beyond.len() / 2;
+    let median = *beyond.select_nth_unstable_by(middle, f32::total_cmp).1;
+    format!(
+        "every depth of a frame is beyond pipeline.max_range_m = {max_range_m} m ({} pixels, \
+         median {median:.2} m): is the depth scale right (replay depth_scale_m: 0.001 for \
+         millimetres, 0.0002 for TUM RGB-D), or is the scene farther than the range?",
+        beyond.len()
+    )
+}
+
 impl Segmenting {
     /// Deprojects and segments one frame; `None` for a malformed one (counted and logged).
     fn process(&mut self, shared: &Shared, observation: Observation) -> Option<FrameWork> {
@@ -207,6 +234,15 @@ impl Segmenting {
                 let max_range_m = shared.config.pipeline.max_range_m;
                 let deprojection = frame.deproject_organised(max_range_m);
                 Counters::add(&counters.invalid_pixels, deprojection.invalid_pixels as u64);
+                if deprojection.invalid_pixels < deprojection.points_in_world.len() {
+                    self.empty_frame_logged = false;
+                } else if !self.empty_frame_logged {
+                    self.empty_frame_logged = true;
+                    tracing::warn!(
+                        "{} (logged once until a frame has depth)",
+                        why_no_depth(&frame.depth_m, max_range_m)
+                    );
+                }
                 (
                     deprojection.points_in_world,
                     Some((frame.intrinsics.width, frame.intrinsics.height)),
@@ -409,5 +445,24 @@ impl Fusing {
         for job in self.objects.take_mesh_jobs(capture_time) {
             shared.mesh_queue.submit(job);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame with no point says why: nothing read, or everything beyond the range with its
+    /// median (TUM depth read as millimetres).
+    #[test]
+    fn a_frame_without_depth_says_whether_the_scale_is_suspect() {
+        let nothing = why_no_depth(&[0.0, f32::NAN, 0.0], 4.0);
+        assert!(nothing.contains("no reading at all"), "{nothing}");
+        let far = why_no_depth(&[0.0, 5.5, 6.0, 9.0], 4.0);
+        assert!(far.contains("beyond pipeline.max_range_m = 4 m"), "{far}");
+        assert!(
+            far.contains("median 6.00 m") && far.contains("depth scale"),
+            "{far}"
+        );
     }
 }

@@ -6,9 +6,13 @@ use tacmesh_source::{DepthSource, Observation, SourceError};
 
 use crate::util::{dummy_driver_installed, isolated, open, primesense_oni};
 
+/// An open that fails must fail rather than hang: a guard, not a bound on how fast (a busy
+/// machine may take seconds to load the drivers).
+const HANG_GUARD: Duration = Duration::from_secs(60);
+
 #[test]
-fn no_device_fails_fast_as_device_missing() {
-    isolated("device::no_device_fails_fast_as_device_missing", || {
+fn no_device_fails_as_device_missing() {
+    isolated("device::no_device_fails_as_device_missing", || {
         let (result, took) = open(None);
         // The test hosts have no camera; on a machine with one this test does not apply.
         match result {
@@ -23,7 +27,7 @@ fn no_device_fails_fast_as_device_missing() {
                 source.name()
             ),
         }
-        assert!(took < Duration::from_secs(5), "took {took:?}");
+        assert!(took < HANG_GUARD, "took {took:?}");
     });
 }
 
@@ -38,7 +42,7 @@ fn unknown_uri_is_device_missing_naming_it() {
             }
             other => panic!("expected DeviceMissing, got {other:?}"),
         }
-        assert!(took < Duration::from_secs(5), "took {took:?}");
+        assert!(took < HANG_GUARD, "took {took:?}");
     });
 }
 
@@ -63,7 +67,7 @@ fn failed_open_repeated_ten_times_does_not_crash() {
                 if let Ok(source) = result {
                     drop(source);
                 }
-                assert!(took < Duration::from_secs(5), "took {took:?}");
+                assert!(took < HANG_GUARD, "took {took:?}");
             }
         },
     );
@@ -158,7 +162,7 @@ fn openni1_recording_through_openni2_playback() {
         let oni = primesense_oni();
         let oni = oni.to_str().expect("the repository's paths are UTF-8");
         let (result, took) = open(Some(oni));
-        assert!(took < Duration::from_secs(10), "took {took:?}");
+        assert!(took < HANG_GUARD, "took {took:?}");
         match result {
             Ok(mut source) => {
                 let mut reference = OniRecording::open(oni).expect("tacmesh-oni reads it");

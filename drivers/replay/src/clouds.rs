@@ -57,6 +57,8 @@ pub struct CloudSequence {
     playhead: Playhead,
     pacer: Pacer,
     decoded: FrameCache<Frame>,
+    /// The first file's cloud, read when the sequence was made, until it is played.
+    first: Option<Frame>,
 }
 
 /// One file's cloud as it is played: organised with its grid when the file is.
@@ -98,6 +100,16 @@ impl CloudSequence {
             0
         };
         let decoded = FrameCache::new(files.len(), cache_bytes);
+        let first = read_frame(&files[0]).map_err(|e| ReplayError::FirstFrame {
+            name: name.clone(),
+            reason: e.to_string(),
+        })?;
+        if !first.cloud.points.iter().any(|p| p.is_finite()) {
+            return Err(ReplayError::FirstFrame {
+                name,
+                reason: format!("{} holds no finite point", files[0].display()),
+            });
+        }
         Ok(Self {
             playhead,
             name,
@@ -105,6 +117,7 @@ impl CloudSequence {
             config,
             pacer,
             decoded,
+            first: Some(first),
         })
     }
 
@@ -131,9 +144,12 @@ impl DepthSource for CloudSequence {
     fn next_observation(&mut self) -> Result<Observation, SourceError> {
         let index = self.playhead.advance(&mut self.pacer, &self.name)?;
         let path = &self.files[index];
+        let first = if index == 0 { self.first.take() } else { None };
         let Frame { cloud, grid } = self
             .decoded
-            .get_or_decode(index, &self.name, || read_frame(path))
+            .get_or_decode(index, &self.name, || {
+                first.map_or_else(|| read_frame(path), Ok)
+            })
             .map_err(|e| SourceError::Malformed {
                 device: self.name.clone(),
                 reason: e.to_string(),

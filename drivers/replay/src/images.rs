@@ -71,6 +71,8 @@ pub struct ImageSequence {
     pacer: Pacer,
     /// Each frame's depth in metres.
     decoded: FrameCache<Vec<f32>>,
+    /// The first frame's depth, read when the sequence was made, until it is played.
+    first: Option<Vec<f32>>,
 }
 
 impl ImageSequence {
@@ -109,6 +111,10 @@ impl ImageSequence {
             name: name.clone(),
             reason,
         })?;
+        check_intrinsics(&config.intrinsics).map_err(|reason| ReplayError::InvalidConfig {
+            name: name.clone(),
+            reason,
+        })?;
         let pacer = Pacer::new(config.pacing);
         let playhead = Playhead::new(files.len(), config.looping);
         let cache_bytes = if config.looping {
@@ -117,6 +123,14 @@ impl ImageSequence {
             0
         };
         let decoded = FrameCache::new(files.len(), cache_bytes);
+        let first = read_depth_m(&files[0], &config).map_err(|e| ReplayError::FirstFrame {
+            name: name.clone(),
+            reason: e.to_string(),
+        })?;
+        check_depth_scale(&first, &config).map_err(|reason| ReplayError::FirstFrame {
+            name: name.clone(),
+            reason,
+        })?;
         Ok(Self {
             playhead,
             name,
@@ -124,6 +138,7 @@ impl ImageSequence {
             config,
             pacer,
             decoded,
+            first: Some(first),
         })
     }
 
@@ -153,6 +168,66 @@ impl ImageSequence {
     pub fn files(&self) -> &[DepthFile] {
         &self.files
     }
+}
+
+/// The widest and narrowest horizontal fields of view a depth camera has, degrees: the focal
+/// length in pixels must put the image's width between them.
+const FIELD_OF_VIEW_DEG: std::ops::RangeInclusive<f32> = 10.0..=170.0;
+
+/// Refuses a pinhole model no depth camera has: a focal length that is not positive (`fx=-5`
+/// mirrors the image; 0 deprojects nothing), a field of view outside [`FIELD_OF_VIEW_DEG`]
+/// (focal lengths in other units), a principal point outside the image.
+fn check_intrinsics(k: &Intrinsics) -> Result<(), String> {
+    let (width, height) = (k.width as f32, k.height as f32);
+    for (name, f, side) in [("fx", k.fx, width), ("fy", k.fy, height)] {
+        if !(f.is_finite() && f > 0.0) {
+            return Err(format!(
+                "{name}={f}: a focal length is a positive number of pixels (about 525 for a \
+                 Kinect at 640x480)"
+            ));
+        }
+        let fov_deg = 2.0 * (0.5 * side / f).atan().to_degrees();
+        if !FIELD_OF_VIEW_DEG.contains(&fov_deg) {
+            return Err(format!(
+                "{name}={f} gives a {fov_deg:.1}° field of view over {side} pixels; depth cameras \
+                 see {}° to {}°: is it in pixels, for this image size?",
+                FIELD_OF_VIEW_DEG.start(),
+                FIELD_OF_VIEW_DEG.end()
+            ));
+        }
+    }
+    for (name, c, side) in [("cx", k.cx, width), ("cy", k.cy, height)] {
+        if !(c.is_finite() && (0.0..=side).contains(&c)) {
+            return Err(format!(
+                "{name}={c}: the principal point is in the image, from 0 to {side} pixels"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The farthest a depth camera of this kind reads, metres: a first frame whose depths are all
+/// beyond it is in other units than `depth_scale_m` says.
+const FARTHEST_DEPTH_M: f32 = 20.0;
+
+/// Refuses a first frame with no depth at all, or whose every depth is beyond
+/// [`FARTHEST_DEPTH_M`] (a depth scale off by a factor: TUM RGB-D's 1/5000 read as
+/// millimetres is 5 times too far, its 16-bit values read as metres 1000 times).
+fn check_depth_scale(depth_m: &[f32], config: &ImageSequenceConfig) -> Result<(), String> {
+    let mut valid: Vec<f32> = depth_m.iter().copied().filter(|&d| d > 0.0).collect();
+    if valid.is_empty() {
+        return Err("every pixel is 0 (no depth): is this a depth image?".to_owned());
+    }
+    let middle = valid.len() / 2;
+    let median = *valid.select_nth_unstable_by(middle, f32::total_cmp).1;
+    if valid.iter().all(|&d| d > FARTHEST_DEPTH_M) {
+        return Err(format!(
+            "every depth is beyond {FARTHEST_DEPTH_M} m (median {median:.1} m) at \
+             depth_scale_m={}: is the scale right? (0.001 for millimetres, 0.0002 for TUM RGB-D)",
+            config.depth_scale_m
+        ));
+    }
+    Ok(())
 }
 
 /// Why a frame of the sequence is malformed.
@@ -196,9 +271,12 @@ impl DepthSource for ImageSequence {
         let index = self.playhead.advance(&mut self.pacer, &self.name)?;
         let file = &self.files[index];
         let config = &self.config;
+        let first = if index == 0 { self.first.take() } else { None };
         let depth_m = self
             .decoded
-            .get_or_decode(index, &self.name, || read_depth_m(file, config))
+            .get_or_decode(index, &self.name, || {
+                first.map_or_else(|| read_depth_m(file, config), Ok)
+            })
             .map_err(|e| SourceError::Malformed {
                 device: self.name.clone(),
                 reason: e.to_string(),

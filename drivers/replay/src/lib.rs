@@ -121,6 +121,10 @@ pub enum ReplayError {
     },
     #[error("{name}: {reason}")]
     InvalidConfig { name: String, reason: String },
+    /// The first frame cannot be played: a recording that would serve nothing fails the start,
+    /// as an unreadable `.oni` or `.bag` does (a bad frame later is skipped and counted).
+    #[error("{name}: its first frame cannot be played, so nothing would be served: {reason}")]
+    FirstFrame { name: String, reason: String },
     #[error("replay spec {spec:?}: {reason}")]
     Spec { spec: String, reason: String },
 }

@@ -301,17 +301,151 @@ fn missing_or_wrong_size_frame_is_malformed_and_the_next_frame_plays() {
     }
     source.next_observation().expect("the frame after plays");
 
-    let mut narrow =
-        ImageSequence::new("narrow", files, ImageSequenceConfig::new(intrinsics, 0.001))
-            .expect("sequence");
-    match narrow.next_observation() {
-        Err(SourceError::Malformed { reason, .. }) => {
+    // A first frame that cannot be played fails the start, as an unreadable .oni does: the
+    // daemon would otherwise serve nothing for ever.
+    match ImageSequence::new("narrow", files, ImageSequenceConfig::new(intrinsics, 0.001)) {
+        Err(ReplayError::FirstFrame { reason, .. }) => {
             assert!(
                 reason.contains("640x480") && reason.contains("320x480"),
                 "{reason}"
             )
         }
-        other => panic!("expected Malformed for the size, got {other:?}"),
+        other => panic!("expected FirstFrame for the size, got {other:?}"),
+    }
+}
+
+/// Every replay source fails the start on a first frame it cannot play (garbage, empty,
+/// truncated, all zeros, every depth far beyond any camera's range) and on intrinsics no camera
+/// has, naming the file or the key; the later frames of a good start are skipped when bad.
+#[test]
+fn a_replay_whose_first_frame_cannot_be_played_fails_at_start() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).expect("written");
+        path
+    };
+    let garbage: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    for (name, bytes) in [
+        ("garbage.ply", garbage.as_slice()),
+        ("empty.ply", b"".as_slice()),
+        ("garbage.pcd", garbage.as_slice()),
+        ("truncated.pcd", b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 3".as_slice()),
+        (
+            "nan.pcd",
+            b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\nnan nan nan\n".as_slice(),
+        ),
+    ] {
+        let path = write(name, bytes);
+        match CloudSequence::new(name, vec![path], CloudSequenceConfig::default()) {
+            Err(err @ ReplayError::FirstFrame { .. }) => {
+                assert!(err.to_string().contains("nothing would be served"), "{err}")
+            }
+            other => panic!("{name}: expected FirstFrame, got {other:?}"),
+        }
+    }
+    // Depth images: all zeros, and TUM's 1/5000 taken for metres (every depth thousands of
+    // metres away).
+    let zeros = write("zeros.pgm", &{
+        let mut b = b"P5 4 2 65535\n".to_vec();
+        b.extend([0u8; 16]);
+        b
+    });
+    let intrinsics = Intrinsics {
+        width: 4,
+        height: 2,
+        fx: 3.0,
+        fy: 3.0,
+        cx: 2.0,
+        cy: 1.0,
+    };
+    let err = ImageSequence::new(
+        "zeros",
+        vec![DepthFile::new(zeros)],
+        ImageSequenceConfig::new(intrinsics, 0.001),
+    )
+    .expect_err("all zeros");
+    assert!(err.to_string().contains("every pixel is 0"), "{err}");
+    let tum = DepthFile::new(data("depth/tum_fr1/1_depth.png"));
+    let tum_intrinsics = Intrinsics {
+        width: 640,
+        height: 480,
+        fx: 517.3,
+        fy: 516.5,
+        cx: 318.6,
+        cy: 255.3,
+    };
+    let err = ImageSequence::new(
+        "tum",
+        vec![tum.clone()],
+        ImageSequenceConfig::new(tum_intrinsics, 1.0),
+    )
+    .expect_err("metres");
+    assert!(err.to_string().contains("is the scale right"), "{err}");
+    assert!(ImageSequence::new(
+        "tum",
+        vec![tum.clone()],
+        ImageSequenceConfig::new(tum_intrinsics, 1.0 / 5000.0)
+    )
+    .is_ok());
+    // Intrinsics no camera has.
+    for (key, k) in [
+        (
+            "fx=-5",
+            Intrinsics {
+                fx: -5.0,
+                ..tum_intrinsics
+            },
+        ),
+        (
+            "fy=0",
+            Intrinsics {
+                fy: 0.0,
+                ..tum_intrinsics
+            },
+        ),
+        (
+            "fx=0.5",
+            Intrinsics {
+                fx: 0.5,
+                ..tum_intrinsics
+            },
+        ),
+        (
+            "fx=100000",
+            Intrinsics {
+                fx: 100_000.0,
+                ..tum_intrinsics
+            },
+        ),
+        (
+            "cx=-1",
+            Intrinsics {
+                cx: -1.0,
+                ..tum_intrinsics
+            },
+        ),
+        (
+            "cy=NaN",
+            Intrinsics {
+                cy: f32::NAN,
+                ..tum_intrinsics
+            },
+        ),
+    ] {
+        let err = ImageSequence::new(
+            "tum",
+            vec![tum.clone()],
+            ImageSequenceConfig::new(k, 1.0 / 5000.0),
+        )
+        .expect_err(key);
+        let name = key.split('=').next().unwrap();
+        assert!(
+            err.to_string().contains(&format!("{name}=")),
+            "{key}: {err}"
+        );
     }
 }
 
