@@ -124,6 +124,30 @@ fn an_unwritable_output_mesh_is_refused_before_meshing() {
     );
 }
 
+/// A device or a FIFO given as a file (`/dev/zero` behind a `.ply` or `.png` name, a FIFO as
+/// a recording) is refused at once, saying what it is: it was once read without end, or
+/// blocked the start waiting for a writer.
+#[test]
+fn devices_and_fifos_given_as_files_are_refused_at_once() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let zero = dir.path().join("zero.ply");
+    std::os::unix::fs::symlink("/dev/zero", &zero).expect("a symlink");
+    let stderr = stderr_of(&["mesh", path_str(&zero), "-o", "x.ply"]);
+    assert!(stderr.contains("a device"), "{stderr}");
+    let zero_png = dir.path().join("zero.png");
+    std::os::unix::fs::symlink("/dev/zero", &zero_png).expect("a symlink");
+    let spec = format!("replay:{}?fx=500&fy=500&cx=320&cy=240", zero_png.display());
+    let stderr = stderr_of(&["run", "--sensor", &spec, "--socket", "/nonexistent/t.sock"]);
+    assert!(stderr.contains("a device"), "{stderr}");
+    let fifo = dir.path().join("take.oni");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let spec = format!("replay:{}", fifo.display());
+        let stderr = stderr_of(&["run", "--sensor", &spec, "--socket", "/nonexistent/t.sock"]);
+        assert!(stderr.contains("FIFO"), "{stderr}");
+    }
+}
+
 /// `tacmesh eval … | head -0`: a closed standard output is a clear error and exit 1, not the
 /// panic (exit 101) that `println!` gives on a broken pipe.
 #[test]

@@ -244,8 +244,12 @@ fn extension(path: &Path) -> String {
         .to_ascii_lowercase()
 }
 
+/// The largest cloud or mesh file read, bytes: 2 GiB (a 100-million-point binary PLY is
+/// 1.2 GB; a depth camera's frame is a few MB).
+pub const MAX_FILE_BYTES: u64 = 2 << 30;
+
 fn read_bytes(path: &Path) -> Result<Vec<u8>, FormatError> {
-    std::fs::read(path).map_err(|error| FormatError::Io {
+    tacmesh_source::read_regular_file(path, MAX_FILE_BYTES).map_err(|error| FormatError::Io {
         name: path.display().to_string(),
         action: "read",
         error,

@@ -578,11 +578,14 @@ fn vectors(x: Column, y: Column, z: Column) -> Vec<Vec3> {
 /// Reads a PCD file, keeping its grid, labels and colours.
 pub fn read_pcd(path: &Path) -> Result<PcdCloud, FormatError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| FormatError::Io {
-        name: name.clone(),
-        action: "read",
-        error,
-    })?;
+    let bytes =
+        tacmesh_source::read_regular_file(path, crate::MAX_FILE_BYTES).map_err(|error| {
+            FormatError::Io {
+                name: name.clone(),
+                action: "read",
+                error,
+            }
+        })?;
     parse(&bytes, &name)
 }
 

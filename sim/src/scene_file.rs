@@ -133,14 +133,20 @@ pub enum SceneFileError {
     },
 }
 
+/// The largest scene file read: 16 MiB of TOML (the demo's is 3 kB).
+pub const MAX_SCENE_FILE_BYTES: u64 = 16 << 20;
+
 impl SceneFile {
     /// Reads and parses the scene file at `path`; mesh paths are relative to its directory.
     pub fn load(path: impl AsRef<Path>) -> Result<SceneFile, SceneFileError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|cause| SceneFileError::Read {
-            file: path.to_owned(),
-            cause,
-        })?;
+        let text =
+            tacmesh_source::read_regular_text(path, MAX_SCENE_FILE_BYTES).map_err(|cause| {
+                SceneFileError::Read {
+                    file: path.to_owned(),
+                    cause,
+                }
+            })?;
         let base_dir = path.parent().unwrap_or(Path::new("."));
         SceneFile::parse(&text, base_dir, &path.display().to_string())
     }

@@ -501,12 +501,17 @@ pub enum ConfigError {
     Access(#[from] AccessError),
 }
 
+/// The largest config file read: 1 MiB (the example is 5 kB).
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
 impl DaemonConfig {
     /// Reads and checks a config file.
     pub fn load(path: &Path) -> Result<DaemonConfig, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|cause| ConfigError::Read {
-            path: path.to_owned(),
-            cause,
+        let text = tacmesh_source::read_regular_text(path, MAX_CONFIG_BYTES).map_err(|cause| {
+            ConfigError::Read {
+                path: path.to_owned(),
+                cause,
+            }
         })?;
         Self::parse(&text, path)
     }

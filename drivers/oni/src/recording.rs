@@ -118,10 +118,13 @@ impl OniRecording<BufReader<File>> {
     /// Opens and indexes the recording at `path`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, OniError> {
         let path = path.as_ref();
-        let file = File::open(path).map_err(|error| OniError::Io {
+        let io = |error| OniError::Io {
             file: path.display().to_string(),
             error,
-        })?;
+        };
+        // A FIFO would block the open until a writer came; a device would never end.
+        tacmesh_source::check_regular_file(path, u64::MAX).map_err(io)?;
+        let file = File::open(path).map_err(io)?;
         Self::from_reader(BufReader::new(file), path.display().to_string())
     }
 }

@@ -129,6 +129,7 @@ pub fn decode_png(bytes: &[u8], name: &str) -> Result<DepthImage, DecodeError> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::IDENTITY);
     let mut reader = decoder.read_info().map_err(png_error)?;
+    check_pixels(name, reader.info().width, reader.info().height)?;
     let (color, depth) = reader.output_color_type();
     if color != png::ColorType::Grayscale || depth != png::BitDepth::Sixteen {
         return Err(DecodeError::NotDepth16 {
@@ -169,6 +170,7 @@ pub fn decode_tiff(bytes: &[u8], name: &str) -> Result<DepthImage, DecodeError> 
         });
     }
     let (width, height) = decoder.dimensions().map_err(tiff_error)?;
+    check_pixels(name, width, height)?;
     let depth = match decoder.read_image().map_err(tiff_error)? {
         tiff::decoder::DecodingResult::U16(depth) => depth,
         _ => {
@@ -337,6 +339,28 @@ pub fn decode_z16(bytes: &[u8], name: &str, layout: Z16Layout) -> Result<DepthIm
     })
 }
 
+/// The largest depth image file read: 256 MiB (a 4096x4096 16-bit frame is 32 MiB).
+pub const MAX_DEPTH_FILE_BYTES: u64 = 256 << 20;
+
+/// The most pixels a depth image may have: 4096x4096 (depth cameras give 2 million at most; a
+/// 20000x20000 PNG, a few kB on disk, once took 1.5 GB to decode).
+pub const MAX_DEPTH_PIXELS: u64 = 4096 * 4096;
+
+/// Refuses an image whose header promises more than [`MAX_DEPTH_PIXELS`], before anything is
+/// allocated for it.
+fn check_pixels(name: &str, width: u32, height: u32) -> Result<(), DecodeError> {
+    if u64::from(width) * u64::from(height) > MAX_DEPTH_PIXELS {
+        return Err(malformed(
+            name,
+            format!(
+                "{width}x{height} pixels, more than the {MAX_DEPTH_PIXELS} (4096x4096) a depth \
+                 image may have"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Whether a path has the extension of a depth image format [`read_depth_image`] reads.
 pub fn is_depth_image_path(path: &Path) -> bool {
     matches!(
@@ -350,9 +374,11 @@ pub fn is_depth_image_path(path: &Path) -> bool {
 pub fn read_depth_image(path: &Path, z16: Option<Z16Layout>) -> Result<DepthImage, DecodeError> {
     let name = path.display().to_string();
     let read = || {
-        std::fs::read(path).map_err(|error| DecodeError::Io {
-            name: name.clone(),
-            error,
+        tacmesh_source::read_regular_file(path, MAX_DEPTH_FILE_BYTES).map_err(|error| {
+            DecodeError::Io {
+                name: name.clone(),
+                error,
+            }
         })
     };
     match extension(path).as_str() {
@@ -422,6 +448,41 @@ mod tests {
         };
         let image = decode_z16(&bytes, "t.z16", layout).expect("padded Z16");
         assert_eq!(image.depth, vec![1, 2, 3, 0x0104]);
+    }
+
+    /// A PNG whose header promises 20000x20000 pixels (a few bytes on disk) is refused before
+    /// its 800 MB buffer is allocated.
+    #[test]
+    fn png_larger_than_the_pixel_cap_is_refused_before_decoding() {
+        fn crc32(bytes: &[u8]) -> u32 {
+            let mut crc = !0u32;
+            for &b in bytes {
+                crc ^= u32::from(b);
+                for _ in 0..8 {
+                    crc = (crc >> 1) ^ (0xedb8_8320 & (crc & 1).wrapping_neg());
+                }
+            }
+            !crc
+        }
+        fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+            let mut out = (data.len() as u32).to_be_bytes().to_vec();
+            let body: Vec<u8> = kind.iter().chain(data).copied().collect();
+            out.extend(&body);
+            out.extend(crc32(&body).to_be_bytes());
+            out
+        }
+        let mut ihdr = 20_000u32.to_be_bytes().to_vec();
+        ihdr.extend(20_000u32.to_be_bytes());
+        ihdr.extend([16, 0, 0, 0, 0]); // 16-bit grey, deflate, no filter method, no interlace
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        png.extend(chunk(b"IHDR", &ihdr));
+        png.extend(chunk(b"IDAT", &[]));
+        png.extend(chunk(b"IEND", &[]));
+        let err = decode_png(&png, "huge.png").unwrap_err().to_string();
+        assert!(
+            err.contains("20000x20000") && err.contains("4096x4096"),
+            "{err}"
+        );
     }
 
     /// A stride times height that overflows `usize` is a malformed layout, not a panic.

@@ -97,6 +97,8 @@ impl Bag {
             path: path.clone(),
             error,
         };
+        // A FIFO would block the open until a writer came; a device would never end.
+        tacmesh_source::check_regular_file(&path, u64::MAX).map_err(io)?;
         let file = File::open(&path).map_err(io)?;
         let file_len = file.metadata().map_err(io)?.len();
         let mut reader = BufReader::new(file);

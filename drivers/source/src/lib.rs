@@ -7,6 +7,8 @@
 //!   [`CloudGrid`] when it is organised.
 //! - [`TriMesh`]: an indexed triangle mesh in metres.
 //! - [`floor_i32`], [`floor_ivec3`]: grid indices of coordinates, without a call to `floorf`.
+//! - [`read_regular_file`]: a file named from outside, refused when it is not a regular file or
+//!   larger than its kind's cap.
 //! - [`monotonic_now`]: the host's monotonic clock, on which every capture time is read;
 //!   [`realtime_now_ns`], [`realtime_of`]: the wall clock, for clients on other hosts.
 //!
@@ -15,6 +17,7 @@
 
 mod clock;
 mod cloud;
+mod file;
 mod floor;
 mod frame;
 mod mesh;
@@ -22,6 +25,7 @@ mod source;
 
 pub use clock::{monotonic_now, realtime_now_ns, realtime_of};
 pub use cloud::{CloudGrid, PointCloud};
+pub use file::{check_regular_file, read_regular_file, read_regular_text};
 pub use floor::{floor_i32, floor_ivec3};
 pub use frame::{Deprojection, DepthFrame, FrameError, Intrinsics};
 pub use mesh::TriMesh;
