@@ -336,7 +336,8 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
         drop(subscription);
     }
 
-    // 2,000 connect/disconnect cycles from four threads; one in ten reads the Hello first.
+    // 2,000 connect/disconnect cycles from four threads; one in ten reads the Hello first, and
+    // gets it, or (when the flood holds this user's places) a Goodbye naming the cap.
     let cycles_started = Instant::now();
     std::thread::scope(|scope| {
         for thread in 0..4 {
@@ -345,7 +346,18 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
                 for k in 0..500 {
                     if k % 10 == thread {
                         let hello = Subscription::connect(socket, Some(Duration::from_secs(10)));
-                        assert!(hello.is_ok(), "cycle {k}: {:?}", hello.err());
+                        assert!(
+                            match &hello {
+                                Ok(_) => true,
+                                Err(tacmesh::subscriber::SubscribeError::Refused {
+                                    reason,
+                                    ..
+                                }) => reason.contains("socket.max_subscribers"),
+                                Err(_) => false,
+                            },
+                            "cycle {k}: {:?}",
+                            hello.err()
+                        );
                     } else {
                         UnixStream::connect(socket).expect("the daemon accepts");
                     }
@@ -399,6 +411,57 @@ fn malicious_clients_are_cut_off_while_a_good_subscriber_keeps_receiving() {
     assert!(
         rss_after_kib < rss_before_kib + 50 * 1024,
         "RSS grew from {rss_before_kib} to {rss_after_kib} KiB"
+    );
+}
+
+/// 1,100 reading connections once exhausted the daemon's descriptors: new clients got no
+/// Hello and V-HACD could not start. Now one user gets `socket.max_subscribers_per_user`
+/// (16 by default) at once and the rest a Goodbye naming the setting; the daemon serves those
+/// it took, and has room again as soon as they leave.
+#[test]
+fn subscribers_past_the_cap_get_a_goodbye_and_the_daemon_keeps_serving() {
+    let _one = ONE_DAEMON_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let daemon = Run::start(&["--sensor", "sim:demo"], &dir.path().join("t.sock"));
+    let mut admitted = Vec::new();
+    let mut refused = 0;
+    for _ in 0..200 {
+        match Subscription::connect(&daemon.socket, Some(Duration::from_secs(30))) {
+            Ok(subscription) => admitted.push(subscription),
+            Err(tacmesh::subscriber::SubscribeError::Refused { reason, .. }) => {
+                assert!(
+                    reason.contains("socket.max_subscribers_per_user"),
+                    "{reason}"
+                );
+                refused += 1;
+            }
+            Err(other) => panic!("neither admitted nor refused: {other}"),
+        }
+    }
+    assert_eq!(admitted.len(), 16, "{refused} refused");
+    // Those admitted are served: each reads its snapshot to the end.
+    for subscription in &mut admitted {
+        while !matches!(
+            subscription.next_message().expect("served"),
+            Message::SnapshotDone
+        ) {}
+    }
+    drop(admitted);
+    // Room again once they have left (each is gone when it closes).
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        match Subscription::connect(&daemon.socket, Some(Duration::from_secs(30))) {
+            Ok(_) => break,
+            Err(err) => assert!(Instant::now() < deadline, "no room after they left: {err}"),
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        daemon.log().contains("refused a subscriber"),
+        "{}",
+        daemon.log()
     );
 }
 

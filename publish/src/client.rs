@@ -173,6 +173,8 @@ fn filtered(
 
 pub(crate) struct Client {
     pub(crate) id: u64,
+    /// The user at the other end (`SO_PEERCRED`), for the per-user cap.
+    pub(crate) peer_uid: Option<u32>,
     stream: UnixStream,
     pending: Mutex<Pending>,
     wake: Condvar,
@@ -182,10 +184,16 @@ pub(crate) struct Client {
 }
 
 impl Client {
-    pub(crate) fn new(id: u64, stream: UnixStream, current: &BTreeMap<u64, ObjectFrames>) -> Self {
+    pub(crate) fn new(
+        id: u64,
+        stream: UnixStream,
+        peer_uid: Option<u32>,
+        current: &BTreeMap<u64, ObjectFrames>,
+    ) -> Self {
         let options = Subscribe::default();
         Self {
             id,
+            peer_uid,
             stream,
             pending: Mutex::new(Pending {
                 updates: Updates {
@@ -673,15 +681,20 @@ pub(crate) fn gone_while_reading(buffered: usize, error: Option<&std::io::Error>
 fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
     let mut decoder = FrameDecoder::new(Sender::Client);
     let mut buffer = [0u8; 4096];
+    let mut last_subscribe: Option<Instant> = None;
     loop {
         let read = match (&client.stream).read(&mut buffer) {
             Ok(0) if client.is_closed() => return Some(Retire::Quiet),
             Ok(0) if decoder.buffered_len() > 0 => {
                 return Some(gone_while_reading(decoder.buffered_len(), None))
             }
-            // The subscriber sends nothing more: it may have closed only its sending side
-            // and still read (the server needs nothing from it). The writer finds out which
-            // at its next write; this thread just ends.
+            // The subscriber sends nothing more. Closed whole, it is gone now (it holds a place
+            // under the caps otherwise until the next write to it fails); with only its
+            // sending side closed it still reads (the server needs nothing from it), and this
+            // thread just ends.
+            Ok(0) if peer_closed(&client.stream) => {
+                return Some(Retire::Gone("disconnected".to_owned()))
+            }
             Ok(0) => return None,
             Ok(read) => read,
             Err(error) if error.kind() == ErrorKind::Interrupted => continue,
@@ -693,6 +706,18 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
             match decoder.next_message() {
                 Ok(Some(Message::Subscribe(options))) => {
                     tracing::debug!(client = client.id, ?options, "subscriber sent Subscribe");
+                    // One Subscribe acted on per RESUBSCRIBE_INTERVAL: a sooner one waits here,
+                    // and what the client sends meanwhile backs up in its own socket.
+                    if let Some(earliest) =
+                        last_subscribe.and_then(|at| at.checked_add(crate::RESUBSCRIBE_INTERVAL))
+                    {
+                        let wait = earliest.saturating_duration_since(Instant::now());
+                        if !wait.is_zero() {
+                            shared.subscribes_throttled.fetch_add(1, Ordering::Relaxed);
+                            std::thread::sleep(wait);
+                        }
+                    }
+                    last_subscribe = Some(Instant::now());
                     let state = lock(&shared.state);
                     client.resubscribe(options, &state.objects);
                 }
@@ -722,6 +747,18 @@ fn read_loop(shared: &Shared, client: &Client) -> Option<Retire> {
             return None;
         }
     }
+}
+
+/// Whether the peer closed its socket whole (both directions), not just its sending side: the
+/// kernel reports a hang-up (`POLLHUP`) for a Unix socket only when both are shut down.
+fn peer_closed(stream: &UnixStream) -> bool {
+    use rustix::event::{poll, PollFd, PollFlags, Timespec};
+    let mut fds = [PollFd::new(stream, PollFlags::OUT)];
+    let now = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    poll(&mut fds, Some(&now)).is_ok() && fds[0].revents().contains(PollFlags::HUP)
 }
 
 /// A subscriber broke the protocol: it is counted as dropped, the log says why, and so does the

@@ -46,6 +46,19 @@ pub use crate::client::{EncodedBody, EncodedPose, EncodedShape};
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
 
+/// Subscribers served at once when the config does not say otherwise. Each costs two threads
+/// and a socket: 1,100 unbounded connections once exhausted the daemon's 1,024 descriptors.
+pub const DEFAULT_MAX_SUBSCRIBERS: usize = 64;
+
+/// Subscribers one user may have at once when the config does not say otherwise, so that one
+/// client in a reconnect loop cannot take every place.
+pub const DEFAULT_MAX_SUBSCRIBERS_PER_USER: usize = 16;
+
+/// The least time between two Subscribes of one subscriber that the publisher acts on; a
+/// sooner one waits (its reader sleeps, so a flood backs up in the client's own socket). A
+/// client asking for a fresh snapshot 600 times a second once cost a quarter of the frame rate.
+pub const RESUBSCRIBE_INTERVAL: Duration = Duration::from_millis(100);
+
 /// A subscriber whose socket accepts no bytes for this long is dropped. The timeout applies
 /// to each blocking write, and a write that made some progress before stalling returns that
 /// progress first, so a subscriber that stops reading is dropped between one and two
@@ -100,6 +113,10 @@ pub struct PublisherConfig {
     /// Only peers these credentials allow may subscribe; `None` admits whoever the socket
     /// file's mode lets connect.
     pub allowed_peers: Option<AllowedPeers>,
+    /// The most subscribers served at once; one more is told so in a Goodbye and refused.
+    pub max_subscribers: usize,
+    /// The most subscribers of one user (by `SO_PEERCRED`) served at once.
+    pub max_subscribers_per_user: usize,
 }
 
 /// Which peers may subscribe, by the credentials the kernel reports for the connecting process
@@ -131,6 +148,8 @@ impl PublisherConfig {
             server_name: format!("tacmesh {}", env!("CARGO_PKG_VERSION")),
             group: None,
             allowed_peers: None,
+            max_subscribers: DEFAULT_MAX_SUBSCRIBERS,
+            max_subscribers_per_user: DEFAULT_MAX_SUBSCRIBERS_PER_USER,
         }
     }
 }
@@ -145,8 +164,11 @@ pub struct PublisherCounters {
     /// simply disconnect are not counted.
     pub clients_dropped: u64,
     /// Connections refused because the peer's credentials are not in
-    /// [`PublisherConfig::allowed_peers`] (or could not be read).
+    /// [`PublisherConfig::allowed_peers`] (or could not be read), or because the subscribers
+    /// (all, or the peer user's) were at their cap.
     pub clients_refused: u64,
+    /// Subscribes held back to [`RESUBSCRIBE_INTERVAL`] after the previous one.
+    pub subscribes_throttled: u64,
     /// Shape frames written to subscribers (snapshots and live), summed over subscribers.
     pub shapes_published: u64,
     /// Pose frames written to subscribers, summed over subscribers.
@@ -298,8 +320,13 @@ pub(crate) struct Shared {
     state: Mutex<State>,
     /// Replaced by [`Publisher::set_allowed_peers`] when the daemon reads the lists again.
     allowed_peers: Mutex<Option<AllowedPeers>>,
+    /// [`PublisherConfig::max_subscribers`] and [`PublisherConfig::max_subscribers_per_user`].
+    max_subscribers: (usize, usize),
+    /// "subscriber connected" and "left" lines, at most a few a second.
+    connection_log: Mutex<LogThrottle>,
     clients_dropped: AtomicU64,
     clients_refused: AtomicU64,
+    pub(crate) subscribes_throttled: AtomicU64,
     shapes_published: AtomicU64,
     poses_published: AtomicU64,
     bodies_published: AtomicU64,
@@ -374,8 +401,11 @@ impl Publisher {
             write_timeout,
             state: Mutex::new(State::default()),
             allowed_peers: Mutex::new(config.allowed_peers.clone()),
+            max_subscribers: (config.max_subscribers, config.max_subscribers_per_user),
+            connection_log: Mutex::new(LogThrottle::default()),
             clients_dropped: AtomicU64::new(0),
             clients_refused: AtomicU64::new(0),
+            subscribes_throttled: AtomicU64::new(0),
             shapes_published: AtomicU64::new(0),
             poses_published: AtomicU64::new(0),
             bodies_published: AtomicU64::new(0),
@@ -669,6 +699,7 @@ impl Publisher {
             clients_connected,
             clients_dropped: self.shared.clients_dropped.load(Ordering::Relaxed),
             clients_refused: self.shared.clients_refused.load(Ordering::Relaxed),
+            subscribes_throttled: self.shared.subscribes_throttled.load(Ordering::Relaxed),
             shapes_published: self.shared.shapes_published.load(Ordering::Relaxed),
             poses_published: self.shared.poses_published.load(Ordering::Relaxed),
             bodies_published: self.shared.bodies_published.load(Ordering::Relaxed),
@@ -819,6 +850,13 @@ impl Shared {
             refuse(stream, &why);
             return;
         }
+        let peer_uid = rustix::net::sockopt::socket_peercred(&stream)
+            .ok()
+            .map(|cred| cred.uid.as_raw());
+        if let Some(why) = self.over_cap(peer_uid) {
+            refuse(stream, &why);
+            return;
+        }
         if let Err(error) =
             rustix::net::sockopt::set_socket_send_buffer_size(&stream, SEND_BUFFER_BYTES)
         {
@@ -834,19 +872,56 @@ impl Shared {
         }
         let id = state.next_client;
         state.next_client += 1;
-        let client = Arc::new(Client::new(id, stream, &state.objects));
+        let client = Arc::new(Client::new(id, stream, peer_uid, &state.objects));
         state.clients.insert(id, Arc::clone(&client));
         // Threads are started under the lock so that shutdown finds their handles; they take
         // the state lock only when they end.
         let spawned = client::start_threads(self, &client);
         drop(state);
         match spawned {
-            Ok(()) => tracing::info!(client = id, "subscriber connected"),
+            Ok(()) => {
+                if let Some(note) = lock(&self.connection_log).allow(Instant::now()) {
+                    tracing::info!(client = id, "subscriber connected{note}");
+                }
+            }
             Err(error) => {
                 self.retire(&client, Retire::Quiet);
                 tracing::warn!(client = id, "cannot start a subscriber's threads: {error}");
             }
         }
+    }
+
+    /// Why a new subscriber of user `uid` is refused for the caps on subscribers, or `None`
+    /// when there is room. Counted and logged as the refusals of the allow lists are.
+    fn over_cap(&self, uid: Option<u32>) -> Option<String> {
+        let (max, max_per_user) = self.max_subscribers;
+        let why = {
+            let state = lock(&self.state);
+            let of_user = state
+                .clients
+                .values()
+                .filter(|c| uid.is_some() && c.peer_uid == uid)
+                .count();
+            if state.clients.len() >= max {
+                format!(
+                    "the daemon serves at most {max} subscribers at once (socket.max_subscribers); \
+                     try again when one has left"
+                )
+            } else if of_user >= max_per_user {
+                format!(
+                    "uid {} has {of_user} subscribers already, the most one user may have \
+                     (socket.max_subscribers_per_user)",
+                    uid.unwrap_or_default()
+                )
+            } else {
+                return None;
+            }
+        };
+        let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
+        if refused.is_power_of_two() {
+            tracing::warn!("refused a subscriber: {why} ({refused} refused so far)");
+        }
+        Some(why)
     }
 
     /// Why [`PublisherConfig::allowed_peers`] does not admit the process at the other end, or
@@ -892,11 +967,50 @@ impl Shared {
         }
         match how {
             Retire::Quiet => {}
-            Retire::Gone(why) => tracing::info!(client = client.id, "subscriber left: {why}"),
+            Retire::Gone(why) => {
+                if let Some(note) = lock(&self.connection_log).allow(Instant::now()) {
+                    tracing::info!(client = client.id, "subscriber left: {why}{note}");
+                }
+            }
             Retire::Dropped(why) => {
                 self.clients_dropped.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(client = client.id, "dropping subscriber: {why}");
             }
         }
+    }
+}
+
+/// A budget of log lines: at most [`LogThrottle::LINES`] in each [`LogThrottle::WINDOW`], and
+/// the next line after a silence says how many were left out. Thousands of connections a second
+/// (a client in a tight reconnect loop) once wrote thousands of lines.
+#[derive(Debug, Default)]
+struct LogThrottle {
+    window_start: Option<Instant>,
+    in_window: u32,
+    left_out: u64,
+}
+
+impl LogThrottle {
+    const LINES: u32 = 20;
+    const WINDOW: Duration = Duration::from_secs(10);
+
+    /// `Some(note)` when a line may be written now (the note is empty, or says how many lines
+    /// were left out before it); `None` when it is to be left out.
+    fn allow(&mut self, now: Instant) -> Option<String> {
+        let start = *self.window_start.get_or_insert(now);
+        if now.saturating_duration_since(start) >= Self::WINDOW {
+            self.window_start = Some(now);
+            self.in_window = 0;
+        }
+        if self.in_window >= Self::LINES {
+            self.left_out += 1;
+            return None;
+        }
+        self.in_window += 1;
+        let note = match std::mem::take(&mut self.left_out) {
+            0 => String::new(),
+            n => format!(" ({n} connection lines like this were left out)"),
+        };
+        Some(note)
     }
 }

@@ -164,7 +164,7 @@ impl PoseSection {
 }
 
 /// The Unix socket meshes are served on.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SocketSection {
     /// Socket path. Default `$XDG_RUNTIME_DIR/tacmesh.sock`, or without a runtime directory
@@ -182,6 +182,25 @@ pub struct SocketSection {
     pub allow_users: Option<Vec<Principal>>,
     /// As `allow_users`, by the connecting process's primary group.
     pub allow_groups: Option<Vec<Principal>>,
+    /// The most subscribers served at once (each costs two threads and a socket); one more
+    /// gets a Goodbye saying so. 1 to 4096, default 64.
+    pub max_subscribers: usize,
+    /// The most subscribers one user may have at once. 1 to 4096, default 16.
+    pub max_subscribers_per_user: usize,
+}
+
+impl Default for SocketSection {
+    fn default() -> Self {
+        Self {
+            path: None,
+            mode: None,
+            group: None,
+            allow_users: None,
+            allow_groups: None,
+            max_subscribers: tacmesh_publish::DEFAULT_MAX_SUBSCRIBERS,
+            max_subscribers_per_user: tacmesh_publish::DEFAULT_MAX_SUBSCRIBERS_PER_USER,
+        }
+    }
 }
 
 /// The per-frame stages.
@@ -640,6 +659,21 @@ impl DaemonConfig {
                 expected: "1 to 16 threads",
             });
         }
+        for (key, value) in [
+            ("socket.max_subscribers", self.socket.max_subscribers),
+            (
+                "socket.max_subscribers_per_user",
+                self.socket.max_subscribers_per_user,
+            ),
+        ] {
+            if !(1..=4096).contains(&value) {
+                return Err(ConfigError::OutOfRange {
+                    key,
+                    value: value.to_string(),
+                    expected: "1 to 4096 subscribers",
+                });
+            }
+        }
         if !(1..=16).contains(&self.pipeline.segment_stride) {
             return Err(ConfigError::OutOfRange {
                 key: "pipeline.segment_stride",
@@ -771,6 +805,14 @@ const KEY_WANTS: &[(&str, &str)] = &[
     (
         "socket.mode",
         "an octal permission string, for example \"0660\"",
+    ),
+    (
+        "socket.max_subscribers",
+        "a whole number of subscribers from 1 to 4096, for example 64",
+    ),
+    (
+        "socket.max_subscribers_per_user",
+        "a whole number of subscribers from 1 to 4096, for example 16",
     ),
     (
         "socket.group",

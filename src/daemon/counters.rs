@@ -291,7 +291,7 @@ impl CounterSnapshot {
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
              objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}, V-HACD fell back {}), shapes published {}, bodies published {}, poses published {}, \
-             bytes sent {}, subscribers {} (dropped {}, refused {}), log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
+             bytes sent {}, subscribers {} (dropped {}, refused {}), subscribes held back {}, log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
             self.frames_processed,
@@ -317,6 +317,7 @@ impl CounterSnapshot {
             self.publisher.clients_connected,
             self.publisher.clients_dropped,
             self.publisher.clients_refused,
+            self.publisher.subscribes_throttled,
             self.log_lines_dropped,
             self.frame_to_publish_p50_ms,
             self.frame_to_publish_p99_ms,

@@ -214,6 +214,8 @@ impl Daemon {
         publisher_config.mode = config.socket_mode()?;
         (publisher_config.group, publisher_config.allowed_peers) = config.socket_access()?;
         let allowed_peers = publisher_config.allowed_peers.clone();
+        publisher_config.max_subscribers = config.socket.max_subscribers;
+        publisher_config.max_subscribers_per_user = config.socket.max_subscribers_per_user;
         let publisher = Publisher::bind(publisher_config)?;
         #[cfg(feature = "zenoh")]
         if let Some(section) = &config.zenoh {
