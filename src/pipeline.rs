@@ -346,15 +346,16 @@ pub struct MeshReport {
     pub pieces: usize,
     pub open_pieces: usize,
     pub pieces_flipped: usize,
-    /// Whether the output is closed and consistently wound, and its signed volume, m³
-    /// (positive: closed outputs always face out).
+    /// Whether the output is closed and consistently wound, and the volume it encloses, m³
+    /// (positive: closed outputs always face out); an open output encloses none (`None`: its
+    /// signed volume would depend on where the opening is, and could be negative).
     pub closed: bool,
     /// Meshes made again because a closed object's came out open or in pieces (on the other
     /// marching-cubes step or a larger voxel, [`LARGER_VOXEL_RETRIES`]); 0 when the first
     /// was one closed piece or there was a viewpoint. `voxel_size_m` and `mesh_step_voxels`
     /// are the kept mesh's.
     pub closing_retries: usize,
-    pub volume_m3: f64,
+    pub volume_m3: Option<f64>,
     pub total_ms: f64,
 }
 
@@ -829,7 +830,7 @@ fn simplify_and_fit(
         open_pieces: turned.open_pieces,
         pieces_flipped: turned.pieces_flipped,
         closed: faced.is_closed(),
-        volume_m3: faced.signed_volume_m3,
+        volume_m3: faced.is_closed().then_some(faced.signed_volume_m3),
         max_residual_bound_m: max_residual_m,
         first_pass_faces: simplified.faces_out,
         faces: mesh.triangles.len(),

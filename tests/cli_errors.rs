@@ -260,6 +260,81 @@ fn voxel_finer_than_the_point_spacing_says_so() {
     assert!(!stderr.contains("too few points"), "{stderr}");
 }
 
+/// Offline output that once said nothing of what went wrong: a cloud spread too far to fuse
+/// gives no surface (it wrote an empty mesh, exit 0), an absurd voxel is refused by clap,
+/// `--objects` that finds nothing fails saying so, and a mesh file in millimetres given to
+/// `eval` or `sim sample` is warned about as `mesh` warns of a cloud.
+#[test]
+fn offline_results_with_nothing_in_them_or_in_other_units_are_said() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let spread = dir.path().join("spread.xyz");
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2e30 - 1e30
+    };
+    let text: String = (0..1000)
+        .map(|_| format!("{} {} {}\n", next(), next(), next()))
+        .collect();
+    std::fs::write(&spread, text).expect("write");
+    let out = path_str(&dir.path().join("out.ply")).to_owned();
+    let stderr = stderr_of(&["mesh", path_str(&spread), "-o", &out]);
+    assert!(
+        stderr.contains("no surface") || stderr.contains("spread"),
+        "{stderr}"
+    );
+    assert!(
+        !std::path::Path::new(&out).exists(),
+        "an empty mesh was written"
+    );
+    for voxel in ["1e30", "0", "-1", "NaN"] {
+        let stderr = stderr_of(&["mesh", path_str(&spread), "-o", &out, "--voxel-m", voxel]);
+        assert!(stderr.contains("from 0.0001 to 10"), "{voxel}: {stderr}");
+    }
+
+    // A flat floor alone: a support, no object.
+    let floor = dir.path().join("floor.xyz");
+    let mut text = String::new();
+    for i in 0..60 {
+        for j in 0..60 {
+            let (x, y) = (i as f32 * 0.01 - 0.3, j as f32 * 0.01 - 0.3);
+            text += &format!("{x} {y} 1.0\n");
+        }
+    }
+    std::fs::write(&floor, text).expect("write");
+    let objects = path_str(&dir.path().join("objects")).to_owned();
+    let stderr = stderr_of(&["mesh", path_str(&floor), "-o", &objects, "--objects"]);
+    assert!(stderr.contains("no object found"), "{stderr}");
+
+    // A tetrahedron 1,000 units across: a metre-sized one written in millimetres.
+    let big = dir.path().join("big.obj");
+    std::fs::write(
+        &big,
+        "v 0 0 0\nv 1000 0 0\nv 0 1000 0\nv 0 0 1000\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .expect("write");
+    let eval = crate::util::tacmesh(&["eval", "cube", path_str(&big)]);
+    let cloud = path_str(&dir.path().join("c.ply")).to_owned();
+    let sample = crate::util::tacmesh(&[
+        "sim",
+        "sample",
+        path_str(&big),
+        "-o",
+        &cloud,
+        "--points",
+        "1000",
+    ]);
+    for (what, out) in [("eval", eval), ("sim sample", sample)] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains("1000 m across") && stderr.contains("millimetres"),
+            "{what}: {stderr}"
+        );
+    }
+}
+
 #[test]
 fn identical_points_say_they_coincide() {
     let dir = tempfile::tempdir().expect("temp dir");

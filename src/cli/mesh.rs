@@ -24,7 +24,7 @@ pub struct MeshArgs {
     /// Voxel edge in metres: the points are fused and their planes fitted per voxel, used as
     /// given [default: 1/50 of the cloud's largest side, grown for noisy or sparse clouds (see
     /// the README)]
-    #[arg(long)]
+    #[arg(long, value_parser = parse_voxel_m, allow_hyphen_values = true)]
     voxel_m: Option<f32>,
     /// Marching-cubes cell edge in voxels, 1 to 4 [default, for a cloud with no viewpoint: 2
     /// when the noise reaches the default voxel, 3 for a dense cloud (the cell within 10 % of
@@ -72,6 +72,14 @@ fn parse_target_mhe(s: &str) -> Result<f32, String> {
     }
 }
 
+/// `--voxel-m`: from 0.1 mm to 10 m (a voxel of 1e30 m once gave an empty mesh, exit 0).
+fn parse_voxel_m(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0001..=10.0).contains(&v) => Ok(v),
+        _ => Err("give a voxel edge in metres from 0.0001 to 10".into()),
+    }
+}
+
 fn parse_scale(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
@@ -83,7 +91,7 @@ fn parse_scale(s: &str) -> Result<f32, String> {
 /// across (1 cm allows for a part of one) to a room or a yard (about 20 m, beyond the range of
 /// any of the cameras tacmesh reads). A cloud outside is in other units, most likely
 /// millimetres.
-const PLAUSIBLE_EXTENT_M: std::ops::RangeInclusive<f32> = 0.01..=20.0;
+pub(crate) const PLAUSIBLE_EXTENT_M: std::ops::RangeInclusive<f32> = 0.01..=20.0;
 
 /// Multiplies the points, and the sensor position the file records, by `factor` (positive, so
 /// normals keep their direction).
@@ -159,6 +167,15 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let config = mesh_config(&args, viewpoint);
     let (mesh, report) =
         mesh_cloud(&cloud, &config).with_context(|| format!("meshing {}", args.cloud.display()))?;
+    // A cloud spread far past its voxels (1,000 points over ±1e30 m) fuses into nothing.
+    anyhow::ensure!(
+        !mesh.triangles.is_empty(),
+        "meshing {} gave no surface: its {} points are too far apart for a voxel of {:.3} m to \
+         join them (is the cloud in metres? give --voxel-m, or --scale for other units)",
+        args.cloud.display(),
+        report.points,
+        report.voxel_size_m
+    );
     tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
     if args.json {
         super::print_json(&MeshOutput {
@@ -175,7 +192,9 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
             faces = report.faces,
             max_residual_m = report.max_residual,
             closed = report.closed,
-            volume_m3 = format!("{:.4}", report.volume_m3),
+            volume_m3 = report
+                .volume_m3
+                .map_or("none (open)".to_owned(), |v| format!("{v:.4}")),
             total_ms = format!("{:.1}", report.total_ms),
             "wrote {}",
             args.output.display()
@@ -309,6 +328,19 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
             Err(err) => tracing::warn!("object {id} ({} points): no mesh: {err}", indices.len()),
         }
     }
+    // Nothing found is said, and is a failure: the caller asked for objects.
+    anyhow::ensure!(
+        !segmentation.objects.is_empty(),
+        "{}: no object found: no cluster of points was left once the {} support plane{} and \
+         the background were taken out (is the cloud in metres, seen from --viewpoint?)",
+        args.cloud.display(),
+        segmentation.planes.len(),
+        if segmentation.planes.len() == 1 {
+            ""
+        } else {
+            "s"
+        }
+    );
     let labels_path = dir.join("labels.txt");
     let mut labels = String::with_capacity(segmentation.labels.len() * 2);
     for label in &segmentation.labels {

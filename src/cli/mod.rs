@@ -197,7 +197,33 @@ pub(crate) fn shape_or_mesh_file(name: &str) -> anyhow::Result<TriMesh> {
             shapes.join(", ")
         );
     }
-    tacmesh::formats::read_mesh(path).context("reading the mesh")
+    let mesh = tacmesh::formats::read_mesh(path).context("reading the mesh")?;
+    warn_if_implausible_mesh(name, &mesh);
+    Ok(mesh)
+}
+
+/// Warns when a mesh file is larger than anything a depth camera sees, or smaller than it
+/// resolves: most likely in other units than metres (a millimetre mesh read as metres is a
+/// 1000 times too large; its Hausdorff error comes out in kilometres).
+fn warn_if_implausible_mesh(name: &str, mesh: &TriMesh) {
+    let Some((lo, hi)) = mesh.bounds() else {
+        return;
+    };
+    let extent_m = (hi - lo).max_element();
+    let (min, max) = mesh::PLAUSIBLE_EXTENT_M.into_inner();
+    if extent_m > max {
+        tracing::warn!(
+            "{name}: the mesh is {extent_m:.0} m across, more than a depth camera sees (up to \
+             about {max:.0} m): tacmesh reads metres; if its unit is millimetres, scale it by \
+             0.001 (`sim sample` takes --extent-m)"
+        );
+    } else if extent_m < min {
+        tracing::warn!(
+            "{name}: the mesh is {:.2} mm across, less than a depth camera resolves: tacmesh \
+             reads metres",
+            extent_m * 1e3
+        );
+    }
 }
 
 /// Parses `x,y,z` (a position in metres) for clap; NaN and infinities are refused.
