@@ -310,7 +310,35 @@ fn check_conversation_and_times(read: &Read1, run: Duration) {
     // (shape version, shape time, pose time, last seen) of each object.
     let mut held: HashMap<u64, (u64, u64, u64, u64)> = HashMap::new();
     let mut updates = 0;
+    // realtime − monotonic of the latest Session or Stats: every realtime time of a Shape or
+    // Pose maps its monotonic one with the same offset, within 5 ms.
+    let mut clock_offset = session.realtime_ns as i128 - session.monotonic_ns as i128;
+    let mut worst_offset_ns = 0i128;
     for (_, _, message) in &read.messages {
+        let mut offsets = Vec::new();
+        match message {
+            Message::Stats(stats) => {
+                clock_offset = stats.realtime_ns as i128 - stats.monotonic_ns as i128;
+            }
+            Message::Shape(s) => {
+                offsets.push(s.shape_time_realtime_ns as i128 - s.shape_time_ns as i128);
+                offsets.push(s.pose.pose_time_realtime_ns as i128 - s.pose.pose_time_ns as i128);
+            }
+            Message::Pose(p) => {
+                offsets.push(p.pose_time_realtime_ns as i128 - p.pose_time_ns as i128);
+            }
+            _ => {}
+        }
+        for offset in offsets {
+            let off = (offset - clock_offset).abs();
+            worst_offset_ns = worst_offset_ns.max(off);
+            assert!(
+                off <= 5_000_000,
+                "a {} maps its times onto the wall clock {:.1} ms off the latest clock pair",
+                message.name(),
+                off as f64 / 1e6
+            );
+        }
         let (id, version, shape_time, pose) = match message {
             Message::Shape(s) => (s.object_id(), s.version(), Some(s.shape_time_ns), s.pose),
             Message::Pose(p) => (p.object_id, p.shape_version, None, *p),
@@ -357,6 +385,10 @@ fn check_conversation_and_times(read: &Read1, run: Duration) {
             (version, shape_time, pose.pose_time_ns, pose.last_seen_ns),
         );
     }
+    eprintln!(
+        "realtime times: at most {:.3} ms off the Session/Stats clock pair",
+        worst_offset_ns as f64 / 1e6
+    );
     assert!(updates > 50, "only {updates} updates in {run:?}");
 }
 

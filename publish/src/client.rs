@@ -14,8 +14,6 @@ use tacmesh_protocol::{
     MAX_REASON_BYTES,
 };
 
-use tacmesh_source::{monotonic_now, realtime_now_ns};
-
 use crate::{lock, Shared};
 
 /// Write timeout for the Goodbye, so that shutdown is quick even for a stalled subscriber.
@@ -611,9 +609,10 @@ fn send_batch(
         WriteFailure::from(std::io::Error::other(error.to_string()))
     };
     if updates.snapshot {
+        let (monotonic_ns, realtime_ns) = tacmesh_source::now_on_both_clocks_ns();
         let session = Session {
-            monotonic_ns: monotonic_now().as_nanos() as u64,
-            realtime_ns: realtime_now_ns(),
+            monotonic_ns,
+            realtime_ns,
             options: options.clone(),
         };
         encode(&Message::Session(session), &mut bytes).map_err(to_io)?;

@@ -351,10 +351,8 @@ impl Daemon {
             }
             next_stats = now + stats_every;
             let snapshot = self.counters();
-            let stats = snapshot.to_stats(
-                tacmesh_source::monotonic_now().as_nanos() as u64,
-                tacmesh_source::realtime_now_ns(),
-            );
+            let (monotonic_ns, realtime_ns) = tacmesh_source::now_on_both_clocks_ns();
+            let stats = snapshot.to_stats(monotonic_ns, realtime_ns);
             if let Err(err) = self.shared.publisher.stats(stats) {
                 tracing::warn!("stats not sent: {err}");
             }

@@ -27,8 +27,38 @@ pub fn realtime_now_ns() -> u64 {
 /// The `CLOCK_REALTIME` nanoseconds of the `CLOCK_MONOTONIC` instant `monotonic`, by the two
 /// clocks' offset now (a wall clock stepped since `monotonic` shifts the answer with it).
 pub fn realtime_of(monotonic: Duration) -> u64 {
-    let offset = realtime_now_ns() as i128 - monotonic_now().as_nanos() as i128;
-    (monotonic.as_nanos() as i128 + offset).clamp(0, u64::MAX as i128) as u64
+    (monotonic.as_nanos() as i128 + realtime_minus_monotonic_ns()).clamp(0, u64::MAX as i128) as u64
+}
+
+/// Now on both clocks, as a pair a client can take the offset between them from: the
+/// monotonic time in nanoseconds and the wall-clock time of the same instant (see
+/// [`realtime_of`] for how the two are matched).
+pub fn now_on_both_clocks_ns() -> (u64, u64) {
+    let monotonic = monotonic_now();
+    (monotonic.as_nanos() as u64, realtime_of(monotonic))
+}
+
+/// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` now, nanoseconds. The wall clock is read between two
+/// readings of the monotonic one, and their midpoint taken; of a few tries, the one with the
+/// two readings closest together. A thread preempted between a single pair of reads (26 ms once,
+/// on a busy machine) would otherwise put its delay into every time converted with it.
+fn realtime_minus_monotonic_ns() -> i128 {
+    let mut best: Option<(i128, i128)> = None; // (gap, offset)
+    for _ in 0..4 {
+        let before = monotonic_now().as_nanos() as i128;
+        let real = realtime_now_ns() as i128;
+        let after = monotonic_now().as_nanos() as i128;
+        let gap = after - before;
+        let offset = real - (before + gap / 2);
+        if best.is_none_or(|(best_gap, _)| gap < best_gap) {
+            best = Some((gap, offset));
+        }
+        // Both reads within 20 µs: as close as it gets.
+        if gap < 20_000 {
+            break;
+        }
+    }
+    best.map_or(0, |(_, offset)| offset)
 }
 
 #[cfg(test)]

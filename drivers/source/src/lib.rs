@@ -23,7 +23,7 @@ mod frame;
 mod mesh;
 mod source;
 
-pub use clock::{monotonic_now, realtime_now_ns, realtime_of};
+pub use clock::{monotonic_now, now_on_both_clocks_ns, realtime_now_ns, realtime_of};
 pub use cloud::{CloudGrid, PointCloud};
 pub use file::{check_regular_file, read_regular_file, read_regular_text};
 pub use floor::{floor_i32, floor_ivec3};
