@@ -398,3 +398,21 @@ fn capture_of_a_missing_recording_or_a_bad_spec_is_an_error_not_a_panic() {
     let stderr = stderr_of(&["capture", "--sensor", "nosuch:thing", "--out", out]);
     assert!(stderr.contains("nosuch"), "{stderr}");
 }
+
+/// A recording shorter than `--frames` is captured whole, and the shortfall said (exit 0); one
+/// that ends before the first frame to write is an error.
+#[test]
+fn capture_of_a_short_recording_writes_what_it_has() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("frames");
+    let out = path_str(&out);
+    let scan = crate::util::test_data("pointclouds/pcl/table_scene_mug_stereo_textured.pcd");
+    let spec = format!("replay:{}", scan.display());
+    let run = crate::util::tacmesh(&["capture", "--sensor", &spec, "--frames", "2", "--out", out]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains("wrote 1 of the 2 asked for"), "{stderr}");
+    assert!(dir.path().join("frames/frame-0.ply").exists());
+    let stderr = stderr_of(&["capture", "--sensor", &spec, "--skip", "1", "--out", out]);
+    assert!(stderr.contains("ended after 1 frames"), "{stderr}");
+}

@@ -58,10 +58,27 @@ pub fn run(args: CaptureArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let max_range_m = config.pipeline.max_range_m;
+    let mut written = 0;
     for k in 0..args.skip + args.frames {
-        let observation = source
-            .next_observation()
-            .with_context(|| format!("frame {k} of {}", section.spec))?;
+        let observation = match source.next_observation() {
+            Ok(observation) => observation,
+            // A recording shorter than asked: what it had is written, and said.
+            Err(tacmesh::source::SourceError::EndOfStream { .. }) => {
+                anyhow::ensure!(
+                    written > 0,
+                    "{} ended after {k} frames, before the first of the {} to write (--skip {})",
+                    section.spec,
+                    args.frames,
+                    args.skip
+                );
+                tacmesh::log_sink::eprint_line(&format!(
+                    "tacmesh: {} ended after {k} frames: wrote {written} of the {} asked for",
+                    section.spec, args.frames
+                ));
+                return Ok(());
+            }
+            Err(err) => return Err(err).with_context(|| format!("frame {k} of {}", section.spec)),
+        };
         if k < args.skip {
             continue;
         }
@@ -91,6 +108,7 @@ pub fn run(args: CaptureArgs) -> anyhow::Result<()> {
         let cloud = PointCloud::new(points);
         tacmesh::formats::write_cloud(&path, &cloud)
             .with_context(|| format!("cannot write {}", path.display()))?;
+        written += 1;
         tacmesh::log_sink::eprint_line(&format!(
             "tacmesh: wrote {} ({} points)",
             path.display(),
