@@ -189,16 +189,34 @@ impl V4l2Spec {
                     .into(),
             ));
         };
+        if !(1..=8192).contains(&width) || !(1..=8192).contains(&height) {
+            return Err(bad(format!(
+                "{width}x{height}: width and height are 1 to 8192 pixels"
+            )));
+        }
+        if !(1..=1000).contains(&fps) {
+            return Err(bad(format!(
+                "fps = {fps}: a camera's rate is 1 to 1000 frames a second"
+            )));
+        }
+        if !(depth_scale_m > 0.0 && depth_scale_m <= 1.0) {
+            return Err(bad(format!(
+                "depth_scale_m = {depth_scale_m}: metres per unit, above 0 and at most 1 (0.001 \
+                 for millimetres)"
+            )));
+        }
+        let intrinsics = tacmesh_source::Intrinsics {
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+        };
+        intrinsics.check_plausible().map_err(bad)?;
         Ok(V4l2Spec {
             device: device.into(),
-            intrinsics: tacmesh_source::Intrinsics {
-                width,
-                height,
-                fx,
-                fy,
-                cx,
-                cy,
-            },
+            intrinsics,
             fps,
             depth_scale_m,
         })
@@ -541,6 +559,23 @@ mod tests {
         let spec = "v4l2:/dev/video2?fx=390&fy=390&cx=331&cy=242&gain=3";
         let err = V4l2Spec::parse(spec, spec.trim_start_matches("v4l2:")).unwrap_err();
         assert!(err.to_string().contains("gain"), "{err}");
+        // Values no camera has are refused where they are parsed, naming the key.
+        for (options, key) in [
+            ("fx=-5&fy=390&cx=331&cy=242", "fx="),
+            ("fx=390&fy=0&cx=331&cy=242", "fy="),
+            ("fx=0.5&fy=390&cx=331&cy=242", "fx="),
+            ("fx=390&fy=390&cx=5000&cy=242", "cx="),
+            ("fx=390&fy=390&cx=331&cy=242&width=0", "width"),
+            ("fx=390&fy=390&cx=331&cy=242&fps=0", "fps"),
+            (
+                "fx=390&fy=390&cx=331&cy=242&depth_scale_m=-1",
+                "depth_scale_m",
+            ),
+        ] {
+            let spec = format!("v4l2:/dev/video2?{options}");
+            let err = V4l2Spec::parse(&spec, spec.trim_start_matches("v4l2:")).unwrap_err();
+            assert!(err.to_string().contains(key), "{options}: {err}");
+        }
     }
 
     /// Without the feature, a spec of the backend says how to build it, whatever its options
