@@ -227,7 +227,6 @@ impl Daemon {
                 tracing::info!("reading {}", source.name());
             }
         }
-        tracing::info!("serving meshes on {}", publisher.socket_path().display());
         let shared = Arc::new(Shared {
             ring: FrameRing::new(config.pipeline.ring_capacity),
             config,
