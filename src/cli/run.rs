@@ -96,14 +96,15 @@ fn parse_duration_s(text: &str) -> Result<f64, String> {
 }
 
 /// Malloc arenas the daemon allows itself.
-const MALLOC_ARENAS: i32 = 2;
+const MALLOC_ARENAS: i32 = 1;
 
 /// Caps glibc's malloc arenas. By default glibc makes an arena per thread that allocates, up
 /// to eight per core; the daemon's threads (sensors, perception, meshers and their pools, two
-/// per subscriber) then kept memory in arenas they no longer used: RSS rose in steps from 44 to
-/// 57 MB over 20 minutes before levelling off, and stayed at about 40 MB with one arena
-/// (issue 39's soak). Two, so that the two meshing threads do not queue for one. A
-/// `MALLOC_ARENA_MAX` in the environment (the systemd units set it too) is left to win.
+/// per subscriber) then keep memory in arenas they no longer use. Soaks of the demo scene
+/// (BENCHMARKS.md, "Soak"): with the default arenas RSS rose in steps from 44 to 57 MB over
+/// 20 minutes (issue 39's audit); with two, from 37 to 55 MB over the hour; with one it was
+/// flat at 40.3 MB from the eighth minute on, with no frame dropped. A `MALLOC_ARENA_MAX` in the
+/// environment (the systemd units set it too) is left to win.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn cap_malloc_arenas() {
     if std::env::var_os("MALLOC_ARENA_MAX").is_some() {
