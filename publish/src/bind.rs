@@ -2,7 +2,7 @@
 //! set the mode.
 
 use std::io::ErrorKind;
-use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
+use std::os::unix::fs::{FileTypeExt, MetadataExt};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::Path;
 
@@ -43,7 +43,7 @@ pub(crate) fn claim(path: &Path, mode: u32, group: Option<u32>) -> Result<Bound,
         // can swap the name for a symlink between the bind and the chmod.
         None => {
             let listener = UnixListener::bind(path).map_err(|source| bind_error(path, source))?;
-            if let Err(error) = prepare_in_place(path, mode, group) {
+            if let Err(error) = prepare_in_place(path, dir, mode, group) {
                 remove_if_ours(path, file_id(path));
                 return Err(error);
             }
@@ -140,7 +140,7 @@ fn bind_privately(
     };
     #[cfg(test)]
     tests::after_bind(dir, &private_name);
-    let linked = prepare_at(&private_fd, path, mode, group).and_then(|()| {
+    let linked = prepare_at(&private_fd, "s".as_ref(), path, mode, group).and_then(|()| {
         match rustix::fs::linkat(&private_fd, "s", &dir_fd, name, AtFlags::empty()) {
             Ok(()) => Ok(true),
             // Another daemon won the race between our check and our link.
@@ -169,16 +169,38 @@ fn bind_error(path: &Path, source: std::io::Error) -> PublishError {
     }
 }
 
-/// Gives the socket `s` in the private directory `private_fd` (to be published as `path`) its
-/// mode and group, by name relative to that directory.
+/// Gives the socket file at `path`, bound in place in `dir` (which `check_socket_dir` passed),
+/// its mode and group, by its name relative to `dir`.
+fn prepare_in_place(
+    path: &Path,
+    dir: &Path,
+    mode: u32,
+    group: Option<u32>,
+) -> Result<(), PublishError> {
+    use rustix::fs::{Mode, OFlags};
+    let directory = OFlags::DIRECTORY | OFlags::CLOEXEC | OFlags::RDONLY;
+    let dir_fd =
+        rustix::fs::open(dir, directory, Mode::empty()).map_err(|errno| PublishError::SetMode {
+            path: path.to_path_buf(),
+            mode,
+            cause: errno.into(),
+        })?;
+    // A bound path has a file name.
+    let name = path.file_name().unwrap_or(path.as_os_str());
+    prepare_at(&dir_fd, name, path, mode, group)
+}
+
+/// Gives the socket `name` in the directory `dir_fd` (to be published as `path`) its mode and
+/// group, by name relative to that directory (the private one, or the socket's own).
 fn prepare_at(
-    private_fd: &impl std::os::fd::AsFd,
+    dir_fd: &impl std::os::fd::AsFd,
+    name: &std::ffi::OsStr,
     path: &Path,
     mode: u32,
     group: Option<u32>,
 ) -> Result<(), PublishError> {
     use rustix::fs::{AtFlags, Mode};
-    rustix::fs::chmodat(private_fd, "s", Mode::from_raw_mode(mode), AtFlags::empty()).map_err(
+    rustix::fs::chmodat(dir_fd, name, Mode::from_raw_mode(mode), AtFlags::empty()).map_err(
         |errno| PublishError::SetMode {
             path: path.to_path_buf(),
             mode,
@@ -196,29 +218,8 @@ fn prepare_at(
             return Err(set_group(ErrorKind::InvalidInput.into()));
         }
         let gid = rustix::fs::Gid::from_raw(gid);
-        rustix::fs::chownat(private_fd, "s", None, Some(gid), AtFlags::SYMLINK_NOFOLLOW)
+        rustix::fs::chownat(dir_fd, name, None, Some(gid), AtFlags::SYMLINK_NOFOLLOW)
             .map_err(|errno| set_group(errno.into()))?;
-    }
-    Ok(())
-}
-
-/// Gives the socket file at `path` its mode and group (bound in place, in a checked directory).
-fn prepare_in_place(path: &Path, mode: u32, group: Option<u32>) -> Result<(), PublishError> {
-    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).map_err(|source| {
-        PublishError::SetMode {
-            path: path.to_path_buf(),
-            mode,
-            cause: source,
-        }
-    })?;
-    if let Some(gid) = group {
-        std::os::unix::fs::lchown(path, None, Some(gid)).map_err(|source| {
-            PublishError::SetGroup {
-                path: path.to_path_buf(),
-                gid,
-                cause: source,
-            }
-        })?;
     }
     Ok(())
 }

@@ -169,10 +169,31 @@ fn filtered(
         .collect()
 }
 
+/// Who is at the other end of a subscriber's connection, as the kernel reported it
+/// (`SO_PEERCRED`) when it connected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Peer {
+    pub(crate) uid: u32,
+    pub(crate) gid: u32,
+    pub(crate) pid: i32,
+}
+
+impl Peer {
+    pub(crate) fn of(stream: &UnixStream) -> std::io::Result<Peer> {
+        let cred = rustix::net::sockopt::socket_peercred(stream)?;
+        Ok(Peer {
+            uid: cred.uid.as_raw(),
+            gid: cred.gid.as_raw(),
+            pid: cred.pid.as_raw_nonzero().get(),
+        })
+    }
+}
+
 pub(crate) struct Client {
     pub(crate) id: u64,
-    /// The user at the other end (`SO_PEERCRED`), for the per-user cap.
-    pub(crate) peer_uid: Option<u32>,
+    /// The user and primary group at the other end (`SO_PEERCRED`, fixed when it connected):
+    /// for the per-user cap and for allow lists read again later.
+    pub(crate) peer: Option<Peer>,
     stream: UnixStream,
     pending: Mutex<Pending>,
     wake: Condvar,
@@ -185,13 +206,13 @@ impl Client {
     pub(crate) fn new(
         id: u64,
         stream: UnixStream,
-        peer_uid: Option<u32>,
+        peer: Option<Peer>,
         current: &BTreeMap<u64, ObjectFrames>,
     ) -> Self {
         let options = Subscribe::default();
         Self {
             id,
-            peer_uid,
+            peer,
             stream,
             pending: Mutex::new(Pending {
                 updates: Updates {
@@ -334,10 +355,6 @@ impl Client {
 
     fn is_closed(&self) -> bool {
         lock(&self.pending).closed
-    }
-
-    pub(crate) fn stream(&self) -> &UnixStream {
-        &self.stream
     }
 }
 

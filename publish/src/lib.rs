@@ -40,7 +40,7 @@ use tacmesh_protocol::{
     encode, Body, Encoding, Message, Pose, Shape, Stats, WireError, MAX_REASON_BYTES,
 };
 
-use crate::client::{Client, ObjectFrames, Retire};
+use crate::client::{Client, ObjectFrames, Peer, Retire};
 pub use crate::client::{EncodedBody, EncodedPose, EncodedShape};
 
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
@@ -660,22 +660,27 @@ impl Publisher {
     }
 
     /// Replaces who may subscribe (the daemon reads its allow lists again, so that a user
-    /// removed from an allowed group loses access without a restart). Subscribers connected
-    /// now whose credentials the new lists do not admit are told so in a Goodbye and dropped;
-    /// returns how many.
-    pub fn set_allowed_peers(&self, allowed: Option<AllowedPeers>) -> usize {
-        *lock(&self.shared.allowed_peers) = allowed.clone();
+    /// removed from an allowed group loses access without a restart). `None` when the lists
+    /// are the ones held already; else how many subscribers connected now the new lists do
+    /// not admit, each told so in a Goodbye and dropped.
+    pub fn set_allowed_peers(&self, allowed: Option<AllowedPeers>) -> Option<usize> {
+        {
+            let mut held = lock(&self.shared.allowed_peers);
+            if *held == allowed {
+                return None;
+            }
+            held.clone_from(&allowed);
+        }
         let Some(allowed) = allowed else {
-            return 0;
+            return Some(0);
         };
         let clients: Vec<Arc<Client>> =
             lock(&self.shared.state).clients.values().cloned().collect();
         let mut revoked = 0;
         for client in clients {
-            let Ok(credentials) = rustix::net::sockopt::socket_peercred(client.stream()) else {
+            let Some(Peer { uid, gid, .. }) = client.peer else {
                 continue;
             };
-            let (uid, gid) = (credentials.uid.as_raw(), credentials.gid.as_raw());
             if allowed.allows(uid, gid) {
                 continue;
             }
@@ -689,7 +694,7 @@ impl Publisher {
                 ),
             );
         }
-        revoked
+        Some(revoked)
     }
 
     /// The counters so far.
@@ -846,17 +851,15 @@ fn refuse(mut stream: UnixStream, why: &str) {
 impl Shared {
     /// Registers a new subscriber with the current snapshot and starts its threads.
     fn admit(self: &Arc<Self>, stream: UnixStream) {
-        if let Some(why) = self.peer_refusal(&stream) {
+        let peer = Peer::of(&stream);
+        if let Some(why) = self
+            .peer_refusal(&peer)
+            .or_else(|| self.over_cap(peer.as_ref().ok().map(|p| p.uid)))
+        {
             refuse(stream, &why);
             return;
         }
-        let peer_uid = rustix::net::sockopt::socket_peercred(&stream)
-            .ok()
-            .map(|cred| cred.uid.as_raw());
-        if let Some(why) = self.over_cap(peer_uid) {
-            refuse(stream, &why);
-            return;
-        }
+        let peer = peer.ok();
         if let Err(error) =
             rustix::net::sockopt::set_socket_send_buffer_size(&stream, SEND_BUFFER_BYTES)
         {
@@ -872,7 +875,7 @@ impl Shared {
         }
         let id = state.next_client;
         state.next_client += 1;
-        let client = Arc::new(Client::new(id, stream, peer_uid, &state.objects));
+        let client = Arc::new(Client::new(id, stream, peer, &state.objects));
         state.clients.insert(id, Arc::clone(&client));
         // Threads are started under the lock so that shutdown finds their handles; they take
         // the state lock only when they end.
@@ -891,6 +894,16 @@ impl Shared {
         }
     }
 
+    /// Counts a refused subscriber; the first refusal and every power of two after it are
+    /// logged (`refused a subscriber: {what} (N refused so far)`), so that a client retrying in
+    /// a loop cannot flood the log.
+    fn count_refusal(&self, what: &str) {
+        let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
+        if refused.is_power_of_two() {
+            tracing::warn!("refused a subscriber: {what} ({refused} refused so far)");
+        }
+    }
+
     /// Why a new subscriber of user `uid` is refused for the caps on subscribers, or `None`
     /// when there is room. Counted and logged as the refusals of the allow lists are.
     fn over_cap(&self, uid: Option<u32>) -> Option<String> {
@@ -900,7 +913,7 @@ impl Shared {
             let of_user = state
                 .clients
                 .values()
-                .filter(|c| uid.is_some() && c.peer_uid == uid)
+                .filter(|c| uid.is_some() && c.peer.map(|p| p.uid) == uid)
                 .count();
             if state.clients.len() >= max {
                 format!(
@@ -917,26 +930,20 @@ impl Shared {
                 return None;
             }
         };
-        let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
-        if refused.is_power_of_two() {
-            tracing::warn!("refused a subscriber: {why} ({refused} refused so far)");
-        }
+        self.count_refusal(&why);
         Some(why)
     }
 
     /// Why [`PublisherConfig::allowed_peers`] does not admit the process at the other end, or
     /// `None` when it does. A refusal is counted; the first and every power of two after it
     /// are logged, so a client retrying in a loop cannot flood the log.
-    fn peer_refusal(&self, stream: &UnixStream) -> Option<String> {
+    fn peer_refusal(&self, peer: &std::io::Result<Peer>) -> Option<String> {
         let allowed = lock(&self.allowed_peers).clone()?;
-        let (verdict, who) = match rustix::net::sockopt::socket_peercred(stream) {
-            Ok(cred) => {
-                let (uid, gid) = (cred.uid.as_raw(), cred.gid.as_raw());
-                (
-                    allowed.allows(uid, gid),
-                    format!("uid {uid} gid {gid} (pid {})", cred.pid.as_raw_nonzero()),
-                )
-            }
+        let (verdict, who) = match peer {
+            Ok(Peer { uid, gid, pid }) => (
+                allowed.allows(*uid, *gid),
+                format!("uid {uid} gid {gid} (pid {pid})"),
+            ),
             Err(error) => (
                 false,
                 format!("a peer whose credentials cannot be read ({error})"),
@@ -945,13 +952,9 @@ impl Shared {
         if verdict {
             return None;
         }
-        let refused = self.clients_refused.fetch_add(1, Ordering::Relaxed) + 1;
-        if refused.is_power_of_two() {
-            tracing::warn!(
-                "refused a subscriber: {who} is not in socket.allow_users / \
-                 socket.allow_groups ({refused} refused so far)"
-            );
-        }
+        self.count_refusal(&format!(
+            "{who} is not in socket.allow_users / socket.allow_groups"
+        ));
         Some(format!(
             "not allowed to subscribe: {who} is not in the daemon's socket.allow_users or \
              socket.allow_groups"

@@ -562,13 +562,13 @@ fn revoked_peers_are_dropped_when_the_lists_are_replaced() {
         member_uids: vec![uid],
         ..AllowedPeers::default()
     };
-    assert_eq!(publisher.set_allowed_peers(Some(same)), 0);
+    assert_eq!(publisher.set_allowed_peers(Some(same)), None);
     let revoked = AllowedPeers {
         uids: vec![uid.wrapping_add(1)],
         gids: vec![gid.wrapping_add(1)],
         member_uids: vec![],
     };
-    assert_eq!(publisher.set_allowed_peers(Some(revoked)), 1);
+    assert_eq!(publisher.set_allowed_peers(Some(revoked)), Some(1));
     match client.next() {
         Some(Message::Goodbye { reason }) => {
             assert!(reason.contains("no longer in"), "{reason}");
@@ -582,7 +582,7 @@ fn revoked_peers_are_dropped_when_the_lists_are_replaced() {
         other => panic!("expected a Goodbye, got {other:?}"),
     }
     // No lists at all: everyone the file mode lets in.
-    assert_eq!(publisher.set_allowed_peers(None), 0);
+    assert_eq!(publisher.set_allowed_peers(None), Some(0));
     let mut again = TestClient::connect(&path);
     again.hello();
 }
@@ -669,6 +669,39 @@ fn the_connection_log_keeps_to_its_budget_and_says_what_it_left_out() {
         Some(" (80 connection lines like this were left out)")
     );
     assert_eq!(throttle.allow(later).as_deref(), Some(""));
+}
+
+/// A socket path so long that the private directory's longer path cannot be bound (a Unix
+/// socket address holds 107 bytes) is bound in place, and still gets its mode and group.
+#[test]
+fn a_socket_too_long_for_the_private_name_is_bound_in_place_with_its_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = dir.path().to_str().unwrap().len() + 1;
+    let name = format!("{}.sock", "s".repeat(100 - base - 5));
+    let path = dir.path().join(&name);
+    assert_eq!(path.to_str().unwrap().len(), 100);
+    let (_, gid) = own_ids(&dir);
+    let mut config = PublisherConfig::new(&path);
+    config.server_name = "tacmesh-test".into();
+    config.mode = 0o600;
+    config.group = Some(gid);
+    let _publisher = Publisher::bind(config).expect("bound in place");
+    use std::os::unix::fs::MetadataExt;
+    let metadata = std::fs::metadata(&path).unwrap();
+    assert_eq!(metadata.permissions().mode() & 0o7777, 0o600);
+    assert_eq!(metadata.gid(), gid);
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n != "ids")
+        .collect();
+    assert_eq!(
+        names,
+        vec![std::ffi::OsString::from(&name)],
+        "only the socket"
+    );
+    let mut client = TestClient::connect(&path);
+    client.hello();
 }
 
 /// This process's user and group, as the kernel will report them for its connections.

@@ -168,8 +168,6 @@ pub struct Daemon {
     heartbeats: Heartbeats,
     /// READY=1, STATUS=, WATCHDOG=1 and STOPPING=1 to systemd (a no-op without it).
     systemd: SystemdFeed,
-    /// Who may subscribe, as last resolved from `socket.allow_users` / `allow_groups`.
-    allowed_peers: Option<tacmesh_publish::AllowedPeers>,
 }
 
 /// How often the allow lists are resolved again (group membership changes without a restart:
@@ -213,7 +211,6 @@ impl Daemon {
         let mut publisher_config = PublisherConfig::new(config.socket_path());
         publisher_config.mode = config.socket_mode()?;
         (publisher_config.group, publisher_config.allowed_peers) = config.socket_access()?;
-        let allowed_peers = publisher_config.allowed_peers.clone();
         publisher_config.max_subscribers = config.socket.max_subscribers;
         publisher_config.max_subscribers_per_user = config.socket.max_subscribers_per_user;
         let publisher = Publisher::bind(publisher_config)?;
@@ -248,7 +245,6 @@ impl Daemon {
             started: Instant::now(),
             heartbeats: Heartbeats::default(),
             systemd: SystemdFeed::new(Notifier::from_env(), Instant::now()),
-            allowed_peers,
         };
         let spawn = |name: &'static str, body: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
@@ -378,22 +374,21 @@ impl Daemon {
     /// Resolves the allow lists again and hands changes to the publisher, which drops the
     /// subscribers no longer admitted. A name that no longer resolves keeps the lists as they
     /// were, with a warning (a passing NSS failure must not lock everyone out).
-    fn refresh_access(&mut self) {
+    fn refresh_access(&self) {
         let socket = &self.shared.config.socket;
         if socket.allow_users.is_none() && socket.allow_groups.is_none() {
             return;
         }
         match self.shared.config.socket_access() {
-            Ok((_, peers)) if peers != self.allowed_peers => {
-                let dropped = self.shared.publisher.set_allowed_peers(peers.clone());
-                tracing::info!(
-                    "socket.allow_users / allow_groups read again: {} ({dropped} subscribers \
-                     no longer admitted were dropped)",
-                    describe_peers(peers.as_ref())
-                );
-                self.allowed_peers = peers;
+            Ok((_, peers)) => {
+                let described = describe_peers(peers.as_ref());
+                if let Some(dropped) = self.shared.publisher.set_allowed_peers(peers) {
+                    tracing::info!(
+                        "socket.allow_users / allow_groups read again: {described} ({dropped} \
+                         subscribers no longer admitted were dropped)"
+                    );
+                }
             }
-            Ok(_) => {}
             Err(err) => tracing::warn!("{err}; keeping who may subscribe as it was"),
         }
     }
