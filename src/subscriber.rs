@@ -72,12 +72,13 @@ impl Default for TrustedServers {
     /// The subscriber's own effective user, root, and the service user `tacmesh` if this
     /// system has one.
     fn default() -> Self {
-        let mut uids = vec![nix::unistd::geteuid().as_raw(), 0];
-        if let Ok(Some(user)) = nix::unistd::User::from_name(SERVICE_USER) {
-            uids.push(user.uid.as_raw());
+        let trusted = Self { uids: Vec::new() }
+            .with_uid(nix::unistd::geteuid().as_raw())
+            .with_uid(0);
+        match nix::unistd::User::from_name(SERVICE_USER) {
+            Ok(Some(user)) => trusted.with_uid(user.uid.as_raw()),
+            _ => trusted,
         }
-        uids.dedup();
-        Self { uids }
     }
 }
 

@@ -155,8 +155,8 @@ pub(crate) fn check_id_count(message: &'static str, count: u64) -> Result<(), Wi
 }
 
 /// A rate cap is 0 (none) or within [`MIN_RATE_HZ`]..=[`MAX_RATE_HZ`]: a server turns it into
-/// an interval, and the interval of a tiny rate overflows every clock.
-pub(crate) fn check_rate(value: f32) -> Result<(), WireError> {
+/// an interval, and the interval of a tiny rate overflows every clock. The error says so.
+pub fn check_rate(value: f32) -> Result<(), WireError> {
     if value == 0.0 || (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&value) {
         Ok(())
     } else {

@@ -26,6 +26,7 @@ mod scene;
 mod tests;
 
 pub use decode::FrameDecoder;
+pub use encode::check_rate;
 pub use encode::encode;
 pub use error::WireError;
 pub use message::{

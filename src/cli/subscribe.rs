@@ -211,9 +211,9 @@ pub fn run(args: SubscribeArgs) -> anyhow::Result<()> {
 /// `--max-rate-hz`: the range the protocol allows (docs/protocol.md, Subscribe), checked here
 /// so that the daemon never has to drop this client for it.
 fn parse_rate_hz(text: &str) -> Result<f32, String> {
-    use tacmesh::protocol::{MAX_RATE_HZ, MIN_RATE_HZ};
+    use tacmesh::protocol::{check_rate, MAX_RATE_HZ, MIN_RATE_HZ};
     match text.trim().parse::<f32>() {
-        Ok(rate) if rate == 0.0 || (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate) => Ok(rate),
+        Ok(rate) if check_rate(rate).is_ok() => Ok(rate),
         _ => Err(format!(
             "give 0 (no cap) or a rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} updates a second"
         )),

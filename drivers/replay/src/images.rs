@@ -181,13 +181,15 @@ const FARTHEST_DEPTH_M: f32 = 20.0;
 /// [`FARTHEST_DEPTH_M`] (a depth scale off by a factor: TUM RGB-D's 1/5000 read as
 /// millimetres is 5 times too far, its 16-bit values read as metres 1000 times).
 fn check_depth_scale(depth_m: &[f32], config: &ImageSequenceConfig) -> Result<(), String> {
-    let mut valid: Vec<f32> = depth_m.iter().copied().filter(|&d| d > 0.0).collect();
-    if valid.is_empty() {
+    let valid = || depth_m.iter().copied().filter(|&d| d > 0.0);
+    if valid().next().is_none() {
         return Err("every pixel is 0 (no depth): is this a depth image?".to_owned());
     }
-    let middle = valid.len() / 2;
-    let median = *valid.select_nth_unstable_by(middle, f32::total_cmp).1;
-    if valid.iter().all(|&d| d > FARTHEST_DEPTH_M) {
+    if valid().all(|d| d > FARTHEST_DEPTH_M) {
+        // Only to say how far: a first frame that passes is not sorted.
+        let mut far: Vec<f32> = valid().collect();
+        let middle = far.len() / 2;
+        let median = *far.select_nth_unstable_by(middle, f32::total_cmp).1;
         return Err(format!(
             "every depth is beyond {FARTHEST_DEPTH_M} m (median {median:.1} m) at \
              depth_scale_m={}: is the scale right? (0.001 for millimetres, 0.0002 for TUM RGB-D)",

@@ -17,45 +17,42 @@ pub struct Intrinsics {
 /// length in pixels must put the image's width between them.
 pub const FIELD_OF_VIEW_DEG: std::ops::RangeInclusive<f32> = 10.0..=170.0;
 
-/// Refuses a pinhole model no depth camera has: a focal length that is not positive (`fx=-5`
-/// mirrors the image; 0 deprojects nothing), a field of view outside [`FIELD_OF_VIEW_DEG`]
-/// (focal lengths in other units), a principal point outside the image.
-pub(crate) fn check_plausible(k: &Intrinsics) -> Result<(), String> {
-    let (width, height) = (k.width as f32, k.height as f32);
-    if k.width == 0 || k.height == 0 {
-        return Err(format!("a {}x{} image has no pixels", k.width, k.height));
-    }
-    for (name, f, side) in [("fx", k.fx, width), ("fy", k.fy, height)] {
-        if !(f.is_finite() && f > 0.0) {
-            return Err(format!(
-                "{name}={f}: a focal length is a positive number of pixels (about 525 for a \
-                 Kinect at 640x480)"
-            ));
-        }
-        let fov_deg = 2.0 * (0.5 * side / f).atan().to_degrees();
-        if !FIELD_OF_VIEW_DEG.contains(&fov_deg) {
-            return Err(format!(
-                "{name}={f} gives a {fov_deg:.1}° field of view over {side} pixels; depth cameras \
-                 see {}° to {}°: is it in pixels, for this image size?",
-                FIELD_OF_VIEW_DEG.start(),
-                FIELD_OF_VIEW_DEG.end()
-            ));
-        }
-    }
-    for (name, c, side) in [("cx", k.cx, width), ("cy", k.cy, height)] {
-        if !(c.is_finite() && (0.0..=side).contains(&c)) {
-            return Err(format!(
-                "{name}={c}: the principal point is in the image, from 0 to {side} pixels"
-            ));
-        }
-    }
-    Ok(())
-}
-
 impl Intrinsics {
-    /// Refuses a pinhole model no depth camera has, saying why: see [`check_plausible`].
+    /// Refuses, saying why, a pinhole model no depth camera has: a focal length that is not
+    /// positive (`fx=-5` mirrors the image; 0 deprojects nothing), a field of view outside
+    /// [`FIELD_OF_VIEW_DEG`] (focal lengths in other units), a principal point outside the
+    /// image.
     pub fn check_plausible(&self) -> Result<(), String> {
-        check_plausible(self)
+        let k = self;
+        let (width, height) = (k.width as f32, k.height as f32);
+        if k.width == 0 || k.height == 0 {
+            return Err(format!("a {}x{} image has no pixels", k.width, k.height));
+        }
+        for (name, f, side) in [("fx", k.fx, width), ("fy", k.fy, height)] {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(format!(
+                    "{name}={f}: a focal length is a positive number of pixels (about 525 for a \
+                     Kinect at 640x480)"
+                ));
+            }
+            let fov_deg = 2.0 * (0.5 * side / f).atan().to_degrees();
+            if !FIELD_OF_VIEW_DEG.contains(&fov_deg) {
+                return Err(format!(
+                    "{name}={f} gives a {fov_deg:.1}° field of view over {side} pixels; depth \
+                     cameras see {}° to {}°: is it in pixels, for this image size?",
+                    FIELD_OF_VIEW_DEG.start(),
+                    FIELD_OF_VIEW_DEG.end()
+                ));
+            }
+        }
+        for (name, c, side) in [("cx", k.cx, width), ("cy", k.cy, height)] {
+            if !(c.is_finite() && (0.0..=side).contains(&c)) {
+                return Err(format!(
+                    "{name}={c}: the principal point is in the image, from 0 to {side} pixels"
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Whether these can deproject anything: a non-zero size, finite non-zero focal lengths and
