@@ -1,5 +1,5 @@
 //! The wire decoder, both directions: what a client reads from the daemon
-//! (`FrameDecoder::new(Sender::Server)`) and what the daemon's per-subscriber reader thread reads
+//! (`FrameDecoder::new(Sender::Server)`) and what the daemon's publisher reads
 //! from a client (`FrameDecoder::new(Sender::Client)`, as in `tacmesh-publish`'s `client.rs`).
 //!
 //! The input is split into chunks the way a socket might return it (the first byte picks the

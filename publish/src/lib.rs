@@ -10,25 +10,29 @@
 //!
 //! Every subscriber gets `Hello`, a snapshot (`Session`, a `Shape` of every current object,
 //! `SnapshotDone`), then live updates, and a new snapshot when its `Subscribe` asks for one.
-//! Each subscriber has its own writer thread and a pending state that holds at most the latest
-//! unsent shape, body and pose of each object, the unsent removes and the latest stats: a slow
-//! subscriber skips versions, and its memory stays bounded by the number of objects. Each
-//! subscriber's options (encoding, rate cap per object, which objects) are applied by its
-//! writer. Its socket's kernel buffer is kept small ([`SEND_BUFFER_BYTES`]), so that little can
-//! be stale there when it reads again. A subscriber that reads nothing for [`WRITE_TIMEOUT`] is
-//! dropped (told why in a Goodbye after the frame it stalled in, when they fit in a raised
-//! buffer); one that only closes its sending side goes on being served. A reader thread per
-//! subscriber decodes what it sends; anything but a well-formed `Subscribe` gets it dropped
-//! with one WARN line (a version-1 Subscribe with a Goodbye saying why first). Blocking std
-//! threads only.
+//! Each subscriber has a pending state that holds at most the latest unsent shape, body and
+//! pose of each object, the unsent removes and the latest stats: a slow subscriber skips
+//! versions, and its memory stays bounded by the number of objects. The next batch of it is
+//! taken only when the last has gone into the socket, under the subscriber's options
+//! (encoding, rate cap per object, which objects). Its socket's kernel buffer is kept small
+//! ([`SEND_BUFFER_BYTES`]), so that little can be stale there when it reads again. A subscriber
+//! whose socket takes nothing for [`WRITE_TIMEOUT`] is dropped (told why in a Goodbye after the
+//! frame it stalled in, when they fit in a raised buffer); one that only closes its sending
+//! side goes on being served. What a subscriber sends is decoded as it comes; anything but a
+//! well-formed `Subscribe` gets it dropped with a Goodbye saying why and one WARN line.
+//!
+//! One thread serves every subscriber: an epoll loop over the listening socket and the
+//! connections (see `serve.rs`); the pipeline's calls queue and wake it.
 
 mod bind;
 mod client;
+mod serve;
 
 #[cfg(test)]
 mod tests;
 
 use std::collections::BTreeMap;
+use std::os::fd::OwnedFd;
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -46,8 +50,8 @@ pub use crate::client::{EncodedBody, EncodedPose, EncodedShape};
 /// Socket file mode when the config does not say otherwise: owner and group read and write.
 pub const DEFAULT_SOCKET_MODE: u32 = 0o660;
 
-/// Subscribers served at once when the config does not say otherwise. Each costs two threads
-/// and a socket: 1,100 unbounded connections once exhausted the daemon's 1,024 descriptors.
+/// Subscribers served at once when the config does not say otherwise. Each costs a socket and
+/// its buffers: 1,100 unbounded connections once exhausted the daemon's 1,024 descriptors.
 pub const DEFAULT_MAX_SUBSCRIBERS: usize = 64;
 
 /// Subscribers one user may have at once when the config does not say otherwise, so that one
@@ -55,14 +59,13 @@ pub const DEFAULT_MAX_SUBSCRIBERS: usize = 64;
 pub const DEFAULT_MAX_SUBSCRIBERS_PER_USER: usize = 16;
 
 /// The least time between two Subscribes of one subscriber that the publisher acts on; a
-/// sooner one waits (its reader sleeps, so a flood backs up in the client's own socket). A
+/// sooner one waits (nothing more is read from it meanwhile, so a flood backs up in the
+/// client's own socket). A
 /// client asking for a fresh snapshot 600 times a second once cost a quarter of the frame rate.
 pub const RESUBSCRIBE_INTERVAL: Duration = Duration::from_millis(100);
 
-/// A subscriber whose socket accepts no bytes for this long is dropped. The timeout applies
-/// to each blocking write, and a write that made some progress before stalling returns that
-/// progress first, so a subscriber that stops reading is dropped between one and two
-/// timeouts after it stopped. A stalled subscriber costs little meanwhile (the latest update
+/// A subscriber whose socket accepts no bytes for this long is dropped: the clock starts when
+/// its socket's buffer is full, shortly after it stops reading. A stalled subscriber costs little meanwhile (the latest update
 /// of each object, and [`SEND_BUFFER_BYTES`] in the kernel), so it is given long enough to
 /// come back: a client paused 20 s in a debugger or a garbage collection resumes with current
 /// data.
@@ -263,7 +266,7 @@ pub enum PublishError {
     #[error("server name {name:?} cannot be sent in a Hello: {cause}")]
     ServerName { name: String, cause: WireError },
 
-    #[error("cannot start the publisher's accept thread: {cause}")]
+    #[error("cannot start the publisher's thread: {cause}")]
     Spawn { cause: std::io::Error },
 
     #[error(
@@ -311,10 +314,12 @@ pub enum PublishError {
     },
 }
 
-/// State shared by the publisher handle, the accept thread and every subscriber's threads.
+/// State shared by the publisher handle (the pipeline's threads) and the serving thread.
 pub(crate) struct Shared {
     /// The encoded Hello, the same for every subscriber.
     hello: Vec<u8>,
+    /// An eventfd that wakes the serving thread when something was queued.
+    waker: OwnedFd,
     /// [`WRITE_TIMEOUT`] except in tests.
     write_timeout: Duration,
     state: Mutex<State>,
@@ -359,7 +364,7 @@ pub struct Publisher {
     path: PathBuf,
     /// (device, inode) of the socket file we bound, so that shutdown removes only our own file.
     file_id: Option<(u64, u64)>,
-    accept: Mutex<Option<JoinHandle<()>>>,
+    serve: Mutex<Option<JoinHandle<()>>>,
     shut_down: std::sync::atomic::AtomicBool,
 }
 
@@ -396,8 +401,18 @@ impl Publisher {
             }
         })?;
         let bound = bind::claim(&config.socket_path, config.mode, config.group)?;
+        let spawn_failed = |cause: std::io::Error| {
+            bind::remove_if_ours(&config.socket_path, bound.file_id);
+            PublishError::Spawn { cause }
+        };
+        let waker = rustix::event::eventfd(
+            0,
+            rustix::event::EventfdFlags::CLOEXEC | rustix::event::EventfdFlags::NONBLOCK,
+        )
+        .map_err(|errno| spawn_failed(errno.into()))?;
         let shared = Arc::new(Shared {
             hello,
+            waker,
             write_timeout,
             state: Mutex::new(State::default()),
             allowed_peers: Mutex::new(config.allowed_peers.clone()),
@@ -411,18 +426,13 @@ impl Publisher {
             bodies_published: AtomicU64::new(0),
             bytes_sent: AtomicU64::new(0),
         });
-        let accept_shared = Arc::clone(&shared);
-        let listener = bound.listener;
-        let accept = std::thread::Builder::new()
-            .name("publish-accept".into())
-            .spawn(move || accept_loop(&accept_shared, listener));
-        let accept = match accept {
-            Ok(handle) => handle,
-            Err(source) => {
-                bind::remove_if_ours(&config.socket_path, bound.file_id);
-                return Err(PublishError::Spawn { cause: source });
-            }
-        };
+        let serve = serve::Serve::new(Arc::clone(&shared), bound.listener)
+            .and_then(|serve| {
+                std::thread::Builder::new()
+                    .name("publish".into())
+                    .spawn(move || serve.run())
+            })
+            .map_err(spawn_failed)?;
         tracing::info!(
             "publishing meshes on {} (mode {:04o})",
             config.socket_path.display(),
@@ -432,7 +442,7 @@ impl Publisher {
             shared,
             path: config.socket_path,
             file_id: bound.file_id,
-            accept: Mutex::new(Some(accept)),
+            serve: Mutex::new(Some(serve)),
             shut_down: std::sync::atomic::AtomicBool::new(false),
         })
     }
@@ -499,6 +509,7 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_shape(object_id, &frames);
         }
+        self.shared.wake();
         for mirror in &state.mirrors {
             mirror.shape(object_id, &frames);
         }
@@ -536,6 +547,7 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_pose(object_id, &frame);
         }
+        self.shared.wake();
         for mirror in &state.mirrors {
             mirror.pose(object_id, &frame);
         }
@@ -602,6 +614,7 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_body(object_id, &frames);
         }
+        self.shared.wake();
         for mirror in &state.mirrors {
             mirror.body(object_id, &frames);
         }
@@ -618,6 +631,7 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_remove(object_id);
         }
+        self.shared.wake();
         for mirror in &state.mirrors {
             mirror.remove(object_id);
         }
@@ -635,6 +649,7 @@ impl Publisher {
         for client in state.clients.values() {
             client.queue_stats(&frame);
         }
+        self.shared.wake();
         for mirror in &state.mirrors {
             mirror.stats(&frame);
         }
@@ -752,29 +767,11 @@ impl Publisher {
         for client in &clients {
             client.say_goodbye(&goodbye);
         }
-        // Wake the accept thread: it sees `stopping` and ends. If the connect fails the thread
-        // is left blocked in accept (detached below) and goes away with the process.
-        let woke_accept = UnixStream::connect(&self.path).is_ok();
-
-        let mut handles: Vec<JoinHandle<()>> = clients
-            .iter()
-            .flat_map(|client| client.take_threads())
-            .collect();
-        let deadline = Instant::now() + GOODBYE_GRACE;
-        while Instant::now() < deadline && !handles.iter().all(JoinHandle::is_finished) {
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        // Whoever has not taken the Goodbye by now is cut off; that unblocks its threads.
-        for client in &clients {
-            self.shared.retire(client, Retire::Quiet);
-        }
-        for handle in handles.drain(..) {
-            let _ = handle.join();
-        }
-        if let Some(accept) = lock(&self.accept).take() {
-            if woke_accept || accept.is_finished() {
-                let _ = accept.join();
-            }
+        // The serving thread sees `stopping`, stops accepting, writes each subscriber what is
+        // queued and the Goodbye, and ends when all have taken it or the grace is over.
+        self.shared.wake();
+        if let Some(serve) = lock(&self.serve).take() {
+            let _ = serve.join();
         }
         bind::remove_if_ours(&self.path, self.file_id);
         tracing::info!("stopped publishing on {} ({reason})", self.path.display());
@@ -812,22 +809,6 @@ pub(crate) fn cap_at_char_boundary(text: &str, max: usize) -> &str {
     &text[..end]
 }
 
-fn accept_loop(shared: &Arc<Shared>, listener: std::os::unix::net::UnixListener) {
-    for connection in listener.incoming() {
-        if lock(&shared.state).stopping {
-            break;
-        }
-        match connection {
-            Ok(stream) => shared.admit(stream),
-            Err(error) => {
-                // Typically out of file descriptors; back off instead of spinning.
-                tracing::warn!("cannot accept a subscriber: {error}");
-                std::thread::sleep(Duration::from_millis(100));
-            }
-        }
-    }
-}
-
 /// Tells a refused peer why, in a Goodbye instead of the Hello (docs/protocol.md), and closes
 /// the connection. Best effort and bounded: the frame is small enough for the socket's buffer,
 /// and a peer that cannot take it at once loses only the explanation. What the peer sent is
@@ -849,49 +830,10 @@ fn refuse(mut stream: UnixStream, why: &str) {
 }
 
 impl Shared {
-    /// Registers a new subscriber with the current snapshot and starts its threads.
-    fn admit(self: &Arc<Self>, stream: UnixStream) {
-        let peer = Peer::of(&stream);
-        if let Some(why) = self
-            .peer_refusal(&peer)
-            .or_else(|| self.over_cap(peer.as_ref().ok().map(|p| p.uid)))
-        {
-            refuse(stream, &why);
-            return;
-        }
-        let peer = peer.ok();
-        if let Err(error) =
-            rustix::net::sockopt::set_socket_send_buffer_size(&stream, SEND_BUFFER_BYTES)
-        {
-            tracing::warn!("cannot shrink a new subscriber's send buffer: {error}");
-        }
-        if let Err(error) = stream.set_write_timeout(Some(self.write_timeout)) {
-            tracing::warn!("cannot set up a new subscriber's socket: {error}");
-            return;
-        }
-        let mut state = lock(&self.state);
-        if state.stopping {
-            return;
-        }
-        let id = state.next_client;
-        state.next_client += 1;
-        let client = Arc::new(Client::new(id, stream, peer, &state.objects));
-        state.clients.insert(id, Arc::clone(&client));
-        // Threads are started under the lock so that shutdown finds their handles; they take
-        // the state lock only when they end.
-        let spawned = client::start_threads(self, &client);
-        drop(state);
-        match spawned {
-            Ok(()) => {
-                if let Some(note) = lock(&self.connection_log).allow(Instant::now()) {
-                    tracing::info!(client = id, "subscriber connected{note}");
-                }
-            }
-            Err(error) => {
-                self.retire(&client, Retire::Quiet);
-                tracing::warn!(client = id, "cannot start a subscriber's threads: {error}");
-            }
-        }
+    /// Wakes the serving thread (something was queued, or it is to stop).
+    fn wake(&self) {
+        // An eventfd write fails only when its counter is full, and then it is awake anyway.
+        let _ = rustix::io::write(&self.waker, &1u64.to_ne_bytes());
     }
 
     /// Counts a refused subscriber; the first refusal and every power of two after it are
@@ -961,13 +903,10 @@ impl Shared {
         ))
     }
 
-    /// Disconnects a subscriber: unregisters it, closes its socket, stops its threads. Only the
-    /// first call for a subscriber logs and counts.
+    /// Unregisters a subscriber whose connection the serving thread closed; logs and counts
+    /// how it left.
     fn retire(&self, client: &Client, how: Retire) {
         lock(&self.state).clients.remove(&client.id);
-        if !client.close() {
-            return;
-        }
         match how {
             Retire::Quiet => {}
             Retire::Gone(why) => {

@@ -182,7 +182,7 @@ pub struct SocketSection {
     pub allow_users: Option<Vec<Principal>>,
     /// As `allow_users`, by the connecting process's primary group.
     pub allow_groups: Option<Vec<Principal>>,
-    /// The most subscribers served at once (each costs two threads and a socket); one more
+    /// The most subscribers served at once (each costs a socket and its buffers); one more
     /// gets a Goodbye saying so. 1 to 4096, default 64.
     pub max_subscribers: usize,
     /// The most subscribers one user may have at once. 1 to 4096, default 16.
