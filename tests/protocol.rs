@@ -497,6 +497,7 @@ fn check_moves_are_poses(read: &Read1) -> u64 {
     let mut path: BTreeMap<u64, (f32, f32)> = BTreeMap::new();
     let mut counts: HashMap<u64, (usize, usize)> = HashMap::new();
     let mut speeds: HashMap<u64, Vec<f32>> = HashMap::new();
+    let mut turn_rates: HashMap<u64, Vec<f32>> = HashMap::new();
     for (_, size, message) in &read.messages {
         scene.apply(message);
         match message {
@@ -508,6 +509,10 @@ fn check_moves_are_poses(read: &Read1) -> u64 {
                         .entry(p.object_id)
                         .or_default()
                         .push(p.linear_velocity.length());
+                    turn_rates
+                        .entry(p.object_id)
+                        .or_default()
+                        .push(p.angular_velocity.length());
                 }
             }
             Message::Shape(s) => counts.entry(s.object_id()).or_default().0 += 1,
@@ -551,6 +556,17 @@ fn check_moves_are_poses(read: &Read1) -> u64 {
     assert!(
         (0.05..0.2).contains(&median),
         "the cone slides at 0.1 m/s; its poses say {median:.3} m/s"
+    );
+    // It slides without turning; its spin about its own axis cannot be seen, and is not
+    // published (it once was, at 18.5°/s).
+    let mut cone_turns = turn_rates.remove(&cone).unwrap_or_default();
+    cone_turns.sort_by(f32::total_cmp);
+    let median_turn = cone_turns[cone_turns.len() / 2].to_degrees();
+    let p90_turn = cone_turns[cone_turns.len() * 9 / 10].to_degrees();
+    eprintln!("the cone's turn rate: median {median_turn:.2}°/s, p90 {p90_turn:.2}°/s");
+    assert!(
+        median_turn < 5.0,
+        "the cone slides without turning; its poses say {median_turn:.1}°/s"
     );
     cone
 }

@@ -70,6 +70,94 @@ pub struct Alignment {
     /// The last level's [`truncated_cost`] at the result, from the same pass that counted the
     /// inliers.
     pub truncated_cost: f64,
+    /// Turns the surface does not show at the result (a cone's or a cylinder's spin about its
+    /// axis, a sphere's about its centre): the alignment left them at the guess.
+    pub unseen_turns: UnseenTurns,
+}
+
+/// Turns the surface cannot show, each about an axis line in the object frame: a cone's or a
+/// cylinder's spin about its own axis, a sphere's about its centre.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct UnseenTurns {
+    /// Unit direction of each axis and the point of it nearest the object origin.
+    axes: [(Vec3, Vec3); 3],
+    count: usize,
+}
+
+impl UnseenTurns {
+    /// How many there are (0 for a surface that fixes every turn).
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// `step` without its turn about the axis, when there is exactly one (a surface of
+    /// revolution: a cone, a cylinder, a torus, a bowl). `step` maps object coordinates at one
+    /// pose to those at another (`object_from_world' = step · object_from_world`); the axis
+    /// moves as before, so an object that slides without turning gets back a pure slide
+    /// however its spin was guessed. (Removing the free eigen-direction of the step instead
+    /// would not do: in the step's coordinates a pure slide has a part along it.)
+    ///
+    /// Two or three (a sphere's cap) are left alone: their lines, from nearly equal small
+    /// eigenvalues, miss the centre by millimetres, and taking a sphere's spin out about that
+    /// pivot moved its centre 5 mm off in three frames (`moving_objects_keep_ids_and_poses_follow`).
+    pub fn removed_from(&self, step: &Affine3A) -> Affine3A {
+        let [(axis, point)] = self.axes[..self.count] else {
+            return *step;
+        };
+        let rotation = Quat::from_mat3a(&step.matrix3);
+        // The swing: what is left of the rotation after its twist about the axis.
+        let kept = rotation * twist_about(rotation, axis).inverse();
+        let moved = step.transform_point3(point);
+        Affine3A::from_rotation_translation(kept, moved - kept * point)
+    }
+}
+
+/// The part of `rotation` about `axis` (unit): the twist of its swing–twist decomposition.
+fn twist_about(rotation: Quat, axis: Vec3) -> Quat {
+    let along = axis * Vec3::new(rotation.x, rotation.y, rotation.z).dot(axis);
+    let twist = Quat::from_xyzw(along.x, along.y, along.z, rotation.w);
+    if twist.length_squared() < 1e-12 {
+        Quat::IDENTITY
+    } else {
+        twist.normalize()
+    }
+}
+
+/// At least this much of an unseen direction's length (squared, in the step's scaled
+/// coordinates `(ω·ρ, t)`) is turn for it to count as a turn; the rest are slides, which the
+/// centroid follows.
+const TURN_SHARE: f64 = 0.5;
+
+/// The directions of `eq` the surface cannot show (curvature below `degenerate_ratio` times
+/// the largest) that are mostly turns, as axis lines.
+fn unseen_turns(eq: &NormalEquations, degenerate_ratio: f32) -> UnseenTurns {
+    let n = eq.inliers.max(1) as f64;
+    let rho = (eq.sum_q2 / n).sqrt().max(1e-3);
+    let scale = [1.0 / rho, 1.0 / rho, 1.0 / rho, 1.0, 1.0, 1.0];
+    let (values, vectors) = symmetric_eigen6(&scaled_full(&eq.h, &scale));
+    let largest = values.iter().copied().fold(0.0f64, f64::max);
+    let mut turns = UnseenTurns::default();
+    for (value, v) in values.iter().zip(&vectors) {
+        let turn: f64 = v[..3].iter().map(|v| v * v).sum();
+        if *value >= f64::from(degenerate_ratio) * largest
+            || turn < TURN_SHARE
+            || turns.count == turns.axes.len()
+        {
+            continue;
+        }
+        // The direction is the twist (ω, t) = (v₀₋₂ / ρ, v₃₋₅): a turn about the line through
+        // ω × t / |ω|² along ω (t = −ω × p for a point p of it).
+        let omega = DVec3::new(v[0], v[1], v[2]) / rho;
+        let t = DVec3::new(v[3], v[4], v[5]);
+        let point = omega.cross(t) / omega.length_squared();
+        turns.axes[turns.count] = (omega.normalize().as_vec3(), point.as_vec3());
+        turns.count += 1;
+    }
+    turns
 }
 
 /// Why the cluster could not be aligned to the model (the tracker then resets the object).
@@ -434,6 +522,7 @@ pub fn align_to_grids(
         inliers: eq.inliers,
         rms_m,
         truncated_cost: eq.sum_r2 + outliers * f64::from(last.reject_m).powi(2),
+        unseen_turns: unseen_turns(&eq, settings.degenerate_ratio),
     })
 }
 

@@ -441,7 +441,11 @@ impl TrackedObject {
         free: Option<&FreeSpace>,
         config: &TrackConfig,
     ) -> Result<Judged, IcpFailure> {
-        let estimate = fit.object_from_world.inverse();
+        // What the surface cannot show is not measured: the step from the held pose loses its
+        // turns about axes the surface leaves free, so that neither the pose nor the velocity
+        // (nor the next prediction) spins a cone or a cylinder about its own axis.
+        let step = fit.object_from_world * self.world_from_object;
+        let estimate = (fit.unseen_turns.removed_from(&step) * self.object_from_world).inverse();
         let (shift_m, turn_rad) = pose_change(&self.world_from_object, &estimate);
         let still_for = capture_time.saturating_sub(self.last_pose_change);
         if still_for >= STILL_BEFORE_JUMP

@@ -25,8 +25,18 @@ fn gaussian3(rng: &mut ChaCha8Rng) -> Vec3 {
 /// A convex shape at a pose, whose visible points a camera samples.
 #[derive(Debug, Clone, Copy)]
 pub enum Body {
-    Sphere { radius_m: f32 },
-    Cube { half_m: f32 },
+    Sphere {
+        radius_m: f32,
+    },
+    Cube {
+        half_m: f32,
+    },
+    /// Its axis along the body's +z from the base (at z = 0, not sampled: it stands on
+    /// something) to the apex.
+    Cone {
+        radius_m: f32,
+        height_m: f32,
+    },
 }
 
 /// `n` points on the part of `body` (placed by `world_from_body`) facing `viewpoint`, as
@@ -60,6 +70,16 @@ pub fn view(
                 );
                 p[axis] = sign * half_m;
                 (p, normal)
+            }
+            Body::Cone { radius_m, height_m } => {
+                // Uniform over the side: the radius at a uniform area fraction goes as its
+                // square root.
+                let r = radius_m * rng.random::<f32>().sqrt();
+                let angle = rng.random_range(0.0..std::f32::consts::TAU);
+                let radial = Vec3::new(angle.cos(), angle.sin(), 0.0);
+                let z = height_m * (1.0 - r / radius_m);
+                let normal = (radial * height_m + Vec3::Z * radius_m).normalize();
+                (radial * r + Vec3::Z * z, normal)
             }
         };
         let p = world_from_body.transform_point3(p_in_body);
