@@ -125,7 +125,7 @@ def ready(daemon: Daemon) -> None:
 
 def test_the_demo_scene_fills_with_objects(daemon: Daemon) -> None:
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
-        seen = follow(sub, lambda m: is_ready(sub.scene) and sub.scene.stats is not None, 10)
+        seen = follow(sub, lambda m: is_ready(sub.scene) and sub.scene.stats is not None, WARM_UP_S)
     first = seen[0]
     assert isinstance(first, Hello) and first.protocol_version == PROTOCOL_VERSION == 3, first
     assert isinstance(seen[1], Session)
@@ -166,7 +166,13 @@ def test_the_moving_object_arrives_as_poses_of_the_same_shape(daemon: Daemon) ->
     # Per object: where its world mesh's centre was (comparable across shape versions, whose
     # object frames' origins may differ).
     centres: dict[int, list[npt.NDArray[np.float64]]] = defaultdict(list)
-    started = time.monotonic()
+
+    def spans() -> dict[int, float]:
+        return {i: float(np.linalg.norm(np.ptp(np.array(c), axis=0))) for i, c in centres.items()}
+
+    # Read until the cone has slid 0.3 m (3 s of its 0.1 m/s) by its Poses, however long a
+    # busy machine takes; the deadline is a hang guard.
+    deadline = time.monotonic() + WARM_UP_S
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
         for message in sub:
             if isinstance(message, Pose):
@@ -178,9 +184,10 @@ def test_the_moving_object_arrives_as_poses_of_the_same_shape(daemon: Daemon) ->
                     # The Pose moved the object and kept its shape.
                     assert held.shape_version == message.shape_version
                     centres[held.object_id].append(held.mesh.vertices.mean(axis=0))
-            if time.monotonic() - started > 6:
-                break
-    assert moves, "no Pose in 6 s"
+                    if max(spans().values()) > 0.3:
+                        break
+            assert time.monotonic() < deadline, f"no object slid 0.3 m: {spans()}"
+    assert moves, "no Pose"
     travel = {
         key: float(np.linalg.norm(np.ptp(np.array(ts), axis=0)))
         for key, ts in moves.items()
@@ -188,21 +195,19 @@ def test_the_moving_object_arrives_as_poses_of_the_same_shape(daemon: Daemon) ->
     }
     # Some object moves by three Poses or more of one shape.
     assert travel and max(travel.values()) > 0.01, travel
-    # The cone slides 0.6 m back and forth at 0.1 m/s: over 6 s its poses take it at least
-    # 0.3 m (less a margin for the tracker's lag), and at most one object moves like that.
-    spans = {i: float(np.linalg.norm(np.ptp(np.array(c), axis=0))) for i, c in centres.items()}
-    mover = max(spans, key=lambda i: spans[i])
-    assert spans[mover] > 0.2, spans
+    # The cone slides 0.6 m back and forth; at most one object moves like that.
+    spans_now = spans()
+    mover = max(spans_now, key=lambda i: spans_now[i])
     # The others stand still: their poses of one shape stay within 5 cm. (Not their meshes'
     # centres across shapes: a one-view object's new shape, fused from more frames, can shift
     # the mean of its vertices by centimetres without any move; CI saw 5.8 cm once.)
     still = {key: t for key, t in travel.items() if key[0] != mover}
-    assert all(t < 0.05 for t in still.values()), (still, spans)
+    assert all(t < 0.05 for t in still.values()), (still, spans_now)
 
 
 def test_times_and_versions_never_go_backwards_per_object(daemon: Daemon) -> None:
     last: dict[int, dict[str, int]] = {}
-    started = time.monotonic()
+    deadline = time.monotonic() + WARM_UP_S
     count = 0
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
         for message in sub:
@@ -223,9 +228,9 @@ def test_times_and_versions_never_go_backwards_per_object(daemon: Daemon) -> Non
                 count += 1
             elif isinstance(message, Remove):
                 last.pop(message.object_id, None)
-            if time.monotonic() - started > 5:
+            if count >= 200:
                 break
-    assert count > 10
+            assert time.monotonic() < deadline, f"only {count} Shapes and Poses"
 
 
 def snapshot(sub: Subscriber) -> tuple[Session, Scene, dict[int, int]]:
@@ -291,15 +296,21 @@ def test_a_filter_by_kind_gives_only_that_kind(daemon: Daemon, kind: str) -> Non
     with Subscriber(daemon.socket_path, kinds=kind, reconnect=False, timeout_s=10) as sub:
         session: Session | None = None
         updates = 0
-        started = time.monotonic()
+        # The snapshot, and 3 s more to see that nothing of the other kind comes (a slow
+        # machine sends less in them, which the checks below allow).
+        complete_at: float | None = None
+        deadline = time.monotonic() + WARM_UP_S
         for message in sub:
             if isinstance(message, Session):
                 session = message
             if isinstance(message, (Shape, Pose)):
                 updates += 1
                 assert (message.object_id >= 1 << 32) == (kind == "supports"), message
-            if sub.scene.complete and time.monotonic() - started > 3:
+            if sub.scene.complete and complete_at is None:
+                complete_at = time.monotonic()
+            if complete_at is not None and time.monotonic() - complete_at > 3:
                 break
+            assert time.monotonic() < deadline, "no complete snapshot"
     assert session is not None and session.options.kinds == Kinds[kind.upper()]
     # Everything outside the filter came before the Session that answered the Subscribe: the
     # daemon sent nothing of the other kind after it.
@@ -311,37 +322,39 @@ def test_a_filter_by_kind_gives_only_that_kind(daemon: Daemon, kind: str) -> Non
         assert len(sub.scene.objects) >= 1 and not sub.scene.non_supports
 
 
-def updates_at_2_hz(daemon: Daemon, seconds: float) -> dict[int, list[float]]:
-    """Per object: when its Shapes and Poses arrived, seconds, with a 2 Hz cap asked for."""
+def updates_at_2_hz(daemon: Daemon) -> tuple[dict[int, list[float]], float]:
+    """Per object: when its Shapes and Poses arrived (seconds), with a 2 Hz cap asked for,
+    read until one object has had 8 of them; and how long that took."""
     arrivals: dict[int, list[float]] = defaultdict(list)
     with Subscriber(daemon.socket_path, max_rate_hz=2, reconnect=False, timeout_s=10) as sub:
-        follow(sub, lambda m: isinstance(m, SnapshotDone), 10)
+        follow(sub, lambda m: isinstance(m, SnapshotDone), WARM_UP_S)
         assert sub.scene.session is not None and sub.scene.session.options.max_rate_hz == 2
         started = time.monotonic()
         for message in sub:
             if isinstance(message, (Shape, Pose)):
                 arrivals[message.object_id].append(time.monotonic() - started)
-            if time.monotonic() - started > seconds:
-                break
-    assert arrivals, f"no update in {seconds} s"
-    return arrivals
+                if len(arrivals[message.object_id]) >= 8:
+                    break
+            assert time.monotonic() - started < WARM_UP_S, f"updates: {dict(arrivals)}"
+    return arrivals, time.monotonic() - started
 
 
 def test_the_rate_cap_spaces_the_updates_of_each_object(daemon: Daemon) -> None:
-    arrivals = updates_at_2_hz(daemon, 4.0)
+    arrivals, seconds = updates_at_2_hz(daemon)
     for object_id, times in arrivals.items():
         # An update is an object's Shape, Body and the newer Pose after them, written together
         # (docs/protocol.md, Subscribe: rate cap); a Body alone is an update too, so the
-        # Shapes and Poses counted here are spaced at least as far apart.
+        # Shapes and Poses counted here are spaced at least as far apart. Arrival times are
+        # the client's: a busy machine can bunch updates the daemon spaced, so what is judged
+        # is their number over the time taken, which bunching cannot raise (one more for an
+        # update waiting when the window began).
         moments = [t for i, t in enumerate(times) if i == 0 or t - times[i - 1] > 0.05]
-        assert len(moments) <= 2 * 4 + 1, (object_id, times)
-        gaps = np.diff(moments)
-        assert len(gaps) == 0 or gaps.min() > 0.4, (object_id, times)
+        assert len(moments) <= 2 * seconds + 2, (object_id, seconds, times)
 
 
 def test_stats_have_the_version_2_counters(daemon: Daemon) -> None:
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
-        seen = follow(sub, lambda m: isinstance(m, Stats) and sub.scene.complete, 10)
+        seen = follow(sub, lambda m: isinstance(m, Stats) and sub.scene.complete, WARM_UP_S)
     stats = seen[-1]
     assert isinstance(stats, Stats)
     assert stats.frames_in > 0 and stats.meshing_runs > 0
