@@ -212,13 +212,20 @@ impl Subscription {
                     })
                 }
             }
-            let n = self
-                .stream
-                .read(&mut self.buffer)
-                .map_err(|cause| SubscribeError::Read {
-                    path: self.path.clone(),
-                    cause,
-                })?;
+            // A socket read with a timeout is never restarted after a signal handler ran
+            // (signal(7)), whatever SA_RESTART says: a Ctrl-C handler or a child's exit in the
+            // same process would otherwise end the subscription.
+            let n = loop {
+                match self.stream.read(&mut self.buffer) {
+                    Err(cause) if cause.kind() == std::io::ErrorKind::Interrupted => {}
+                    other => {
+                        break other.map_err(|cause| SubscribeError::Read {
+                            path: self.path.clone(),
+                            cause,
+                        })?
+                    }
+                }
+            };
             if n == 0 {
                 return Err(SubscribeError::Closed {
                     path: self.path.clone(),
