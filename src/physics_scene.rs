@@ -1,6 +1,8 @@
 //! A physics scene of what a subscriber holds (`tacmesh subscribe --out DIR --mjcf --sdf`): each
 //! object a moving body with convex collision parts and mass properties, each support plane a
-//! plane, gravity towards the largest support. An object whose body does not stand on a
+//! finite slab under what was seen of it, gravity towards the largest support. Pairs that
+//! start inside each other (two one-view proxies that each take in the space behind them, a
+//! body reaching into a slab) do not collide with each other; the rest all collide. An object whose body does not stand on a
 //! support by itself (it touches it in fewer than three points, or its centre of mass is not
 //! above them: a fragment held up by another object) is held still instead, a static body
 //! that still collides.
@@ -19,8 +21,14 @@ use std::collections::HashMap;
 
 use glam::{Affine3A, Vec3};
 use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
-use tacmesh_physics::scene::{Motion, Scene as SimScene, SceneBody, ScenePlane, WorldFromBody};
-use tacmesh_physics::{convex_parts, rests_on, ConvexConfig, MassProperties, WorldSupport};
+use tacmesh_physics::scene::{
+    Exclusion, Member, Motion, Scene as SimScene, SceneBody, SceneSupport, WorldFromBody,
+    SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
+};
+use tacmesh_physics::{
+    convex_parts, lift_onto_supports, rests_on, starting_overlaps, ConvexConfig, MassProperties,
+    WorldSupport, LIFT_MAX_M, OVERLAP_TOLERANCE_M,
+};
 use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
 
@@ -57,10 +65,34 @@ pub struct PhysicsUpdate {
     /// with why: a fragment of an object held up by another, or a proxy that leans off its
     /// foot would topple or fall in the simulation.
     pub held_still: Vec<(u64, String)>,
+    /// Pairs that start inside each other and do not collide with each other: names (the
+    /// scene's `object-N`, `plane-N`) and how deep, metres.
+    pub overlaps: Vec<(String, String, f32)>,
+    /// Bodies lifted onto the support they reached a little into (a proxy grown by the
+    /// sensor's noise): body, support, metres.
+    pub lifted: Vec<(String, String, f32)>,
 }
 
-fn world_support(object: &SceneObject) -> Option<WorldSupport> {
-    WorldSupport::of_fan(object.object_id(), &object.world_mesh())
+/// A support's plane and the outline of what was seen of it, in the world.
+fn world_support(object: &SceneObject) -> Option<(WorldSupport, Vec<glam::Vec3>)> {
+    let fan = object.world_mesh();
+    WorldSupport::of_fan(object.object_id(), &fan).map(|s| (s, fan.vertices))
+}
+
+/// The mass properties a body is simulated with: the published (or computed) ones when an
+/// engine can take them, else those of its convex parts together (a fallback body is held to
+/// the same rules: MuJoCo refuses a scene with one implausible inertia). `Err` with why when
+/// neither will do.
+fn plausible_mass(parts: &[TriMesh], mass: &MassProperties) -> Result<MassProperties, String> {
+    let Some(why) = mass.implausible() else {
+        return Ok(*mass);
+    };
+    let of_parts: Result<Vec<MassProperties>, _> =
+        parts.iter().map(MassProperties::of_closed_mesh).collect();
+    match of_parts.ok().and_then(|m| MassProperties::sum(&m).ok()) {
+        Some(sum) if sum.implausible().is_none() => Ok(sum),
+        _ => Err(format!("its mass properties cannot be simulated: {why}")),
+    }
 }
 
 impl PhysicsScene {
@@ -71,11 +103,11 @@ impl PhysicsScene {
     /// The physics scene of `scene` now: collision parts of new shapes computed, those of
     /// objects gone forgotten.
     pub fn update(&mut self, scene: &Scene) -> PhysicsUpdate {
-        let supports: Vec<WorldSupport> = scene
+        let (supports, outlines): (Vec<WorldSupport>, Vec<Vec<glam::Vec3>>) = scene
             .objects()
             .filter(|o| o.shape.is_support())
             .filter_map(world_support)
-            .collect();
+            .unzip();
         // Gravity pulls towards the largest support (the floor or the table the camera looks
         // at); with none, along −z.
         let up = supports
@@ -124,11 +156,18 @@ impl PhysicsScene {
             match &self.collisions[&id].parts {
                 Ok((parts, mass, _)) => {
                     let support = support_under(&supports, object, world_from_object);
-                    let motion = match support {
-                        Some(support) if rests_on(parts, mass.centre_of_mass, support) => {
+                    let plausible = plausible_mass(parts, mass);
+                    let motion = match (support, &plausible) {
+                        (_, Err(why)) => {
+                            held_still.push((id, why.clone()));
+                            Motion::Static
+                        }
+                        (Some(support), Ok(mass))
+                            if rests_on(parts, mass.centre_of_mass, support) =>
+                        {
                             Motion::Dynamic
                         }
-                        Some(_) => {
+                        (Some(_), Ok(_)) => {
                             held_still.push((
                                 id,
                                 "its centre of mass is not above where it touches its support"
@@ -136,7 +175,7 @@ impl PhysicsScene {
                             ));
                             Motion::Static
                         }
-                        None => {
+                        (None, Ok(_)) => {
                             held_still.push((id, "it stands on no support".to_owned()));
                             Motion::Static
                         }
@@ -149,34 +188,65 @@ impl PhysicsScene {
                         },
                         visual: object.shape.mesh.clone(),
                         convex_parts: parts.clone(),
-                        mass: *mass,
+                        mass: plausible.unwrap_or(*mass),
                         motion,
                     })
                 }
                 Err(why) => left_out.push((id, why.clone())),
             }
         }
+        let slabs: Vec<SceneSupport> = supports
+            .iter()
+            .zip(&outlines)
+            .filter_map(|(s, outline)| {
+                let name = match s.object_id.checked_sub(FIRST_PLANE_ID) {
+                    Some(n) => format!("plane-{}", n + 1),
+                    None => format!("support-{}", s.object_id),
+                };
+                SceneSupport::from_outline(
+                    name,
+                    s.point,
+                    s.normal,
+                    outline,
+                    SUPPORT_MARGIN_M,
+                    SUPPORT_THICKNESS_M,
+                )
+            })
+            .collect();
+        let mut scene = SimScene {
+            gravity_m_s2: -GRAVITY_M_S2 * up,
+            supports: slabs,
+            bodies,
+            exclusions: Vec::new(),
+        };
+        let lifted = lift_onto_supports(&mut scene, OVERLAP_TOLERANCE_M, LIFT_MAX_M)
+            .into_iter()
+            .map(|(body, support, lift_m)| {
+                (
+                    scene.bodies[body].name.clone(),
+                    scene.supports[support].name.clone(),
+                    lift_m,
+                )
+            })
+            .collect();
+        scene.exclusions = starting_overlaps(&scene, OVERLAP_TOLERANCE_M);
+        let name = |m: Member| match m {
+            Member::Support(k) => scene.supports[k].name.clone(),
+            Member::Body(k) => scene.bodies[k].name.clone(),
+        };
+        let overlaps = scene
+            .exclusions
+            .iter()
+            .map(|&Exclusion { a, b, depth_m }| (name(a), name(b), depth_m))
+            .collect();
         PhysicsUpdate {
-            scene: SimScene {
-                gravity_m_s2: -GRAVITY_M_S2 * up,
-                supports: supports
-                    .iter()
-                    .map(|s| ScenePlane {
-                        name: match s.object_id.checked_sub(FIRST_PLANE_ID) {
-                            Some(n) => format!("plane-{}", n + 1),
-                            None => format!("support-{}", s.object_id),
-                        },
-                        point_in_world: s.point,
-                        normal_in_world: s.normal,
-                        drawn_half_size_m: s.half_size_m,
-                    })
-                    .collect(),
-                bodies,
-            },
+            scene,
             decomposed,
             from_bodies,
             left_out,
             held_still,
+            overlaps,
+            lifted,
         }
     }
 }

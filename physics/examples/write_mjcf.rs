@@ -1,5 +1,7 @@
-//! Writes a demo MuJoCo scene: a 10 cm cube resting on a support plane and a 5 cm sphere
-//! dropped beside it, each with its convex parts and mass properties, and a static box.
+//! Writes a demo MuJoCo scene: a 10 cm cube resting on the floor and a 5 cm sphere dropped
+//! beside it, each with its convex parts and mass properties, a static box, and a desk top
+//! 0.4 m up with a cube on it and another on the floor under it (where an infinite plane of the
+//! desk would swallow it). Each support is a finite slab.
 //!
 //! `cargo run -p tacmesh-physics --example write_mjcf -- DIR [--up z|y] [--sdf]`
 //!
@@ -14,7 +16,7 @@ use std::process::ExitCode;
 use glam::{Quat, Vec3};
 use tacmesh_physics::{
     convex_parts, write_mjcf, write_sdf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Scene,
-    SceneBody, ScenePlane, SdfConfig, TriMesh, WorldFromBody,
+    SceneBody, SceneSupport, SdfConfig, TriMesh, WorldFromBody,
 };
 use tacmesh_sim::{cube, uv_sphere};
 
@@ -43,14 +45,25 @@ fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
         rotation: world_from_layout * Quat::from_rotation_z(yaw),
         translation_m: world_from_layout * p,
     };
+    let slab = |name: &str, centre: Vec3, half: glam::Vec2| SceneSupport {
+        name: name.into(),
+        top_centre_in_world: world_from_layout * centre,
+        normal_in_world: up,
+        along_in_world: world_from_layout * Vec3::X,
+        half_size_m: half,
+        thickness_m: 0.05,
+    };
     Ok(Scene {
         gravity_m_s2: -9.81 * up,
-        supports: vec![ScenePlane {
-            name: "table".into(),
-            point_in_world: Vec3::ZERO,
-            normal_in_world: up,
-            drawn_half_size_m: 1.0,
-        }],
+        supports: vec![
+            slab("table", Vec3::ZERO, glam::Vec2::splat(1.0)),
+            slab(
+                "desk",
+                Vec3::new(0.6, 0.0, 0.4),
+                glam::Vec2::new(0.25, 0.15),
+            ),
+        ],
+        exclusions: vec![],
         bodies: vec![
             // Resting: its lowest face on the plane.
             body(
@@ -62,7 +75,19 @@ fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
             body(
                 "sphere",
                 uv_sphere(16, 8, 0.05),
-                at(Vec3::new(0.3, 0.0, 0.2), 0.0),
+                at(Vec3::new(0.0, 0.3, 0.2), 0.0),
+                Motion::Dynamic,
+            )?,
+            body(
+                "on_desk",
+                cube(0.1),
+                at(Vec3::new(0.6, 0.0, 0.45), 0.2),
+                Motion::Dynamic,
+            )?,
+            body(
+                "under_desk",
+                cube(0.1),
+                at(Vec3::new(0.6, 0.0, 0.05), -0.3),
                 Motion::Dynamic,
             )?,
             body(

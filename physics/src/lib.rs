@@ -8,6 +8,7 @@ pub mod error;
 pub mod mass;
 pub mod mjcf;
 pub mod orientation;
+pub mod overlap;
 pub mod proxy;
 pub mod scene;
 pub mod sdf;
@@ -20,8 +21,12 @@ pub use convex::{
 pub use error::PhysicsError;
 pub use mass::MassProperties;
 pub use mjcf::{mjcf_document, write_mjcf, MjcfConfig, MjcfDocument};
+pub use overlap::{lift_onto_supports, starting_overlaps, LIFT_MAX_M, OVERLAP_TOLERANCE_M};
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
-pub use scene::{Motion, Scene, SceneBody, ScenePlane, WorldFromBody, WrittenScene};
+pub use scene::{
+    Exclusion, Member, Motion, Scene, SceneBody, SceneSupport, WorldFromBody, WrittenScene,
+    SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
+};
 pub use sdf::{sdf_document, write_sdf, SdfConfig, SdfDocument};
-pub use support::{rests_on, support_under, WorldSupport};
+pub use support::{min_area_rectangle, rests_on, support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;

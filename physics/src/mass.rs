@@ -186,6 +186,48 @@ impl MassProperties {
     }
 
     /// Mass in kilograms at `density_kg_m3`.
+    /// Why these are not the mass properties of a solid an engine can simulate, or `None`:
+    /// a volume that is not positive, a centre of mass that is not finite, an inertia that is
+    /// not symmetric positive definite or whose principal moments break the triangle
+    /// inequality (each at most the sum of the other two, as for every real body: MuJoCo
+    /// refuses such a body, "inertia must satisfy A + B >= C", and Bullet simulates it wrong).
+    pub fn implausible(&self) -> Option<String> {
+        if !(self.volume_m3.is_finite() && self.volume_m3 > 0.0) {
+            return Some(format!("its volume {} m³ is not positive", self.volume_m3));
+        }
+        if !self.centre_of_mass.is_finite() {
+            return Some("its centre of mass is not finite".to_owned());
+        }
+        let i = self.inertia;
+        let flat = i.iter().flatten();
+        if flat.clone().any(|v| !v.is_finite()) {
+            return Some("its inertia is not finite".to_owned());
+        }
+        let scale = flat.fold(0.0f32, |m, v| m.max(v.abs()));
+        let asymmetry = (i[0][1] - i[1][0])
+            .abs()
+            .max((i[0][2] - i[2][0]).abs())
+            .max((i[1][2] - i[2][1]).abs());
+        if asymmetry > 1e-4 * scale {
+            return Some("its inertia is not symmetric".to_owned());
+        }
+        let m = parry3d::math::Mat3::from_cols_array_2d(&i);
+        let moments = parry3d::math::SymmetricEigen3::new(m).eigenvalues;
+        let [a, b, c] = moments.to_array();
+        let tolerance = 1e-5 * scale;
+        if a.min(b).min(c) <= 0.0 {
+            return Some(format!(
+                "its inertia is not positive definite (principal moments {a:e}, {b:e}, {c:e} m⁵)"
+            ));
+        }
+        if a > b + c + tolerance || b > a + c + tolerance || c > a + b + tolerance {
+            return Some(format!(
+                "its principal moments {a:e}, {b:e}, {c:e} m⁵ break the triangle inequality"
+            ));
+        }
+        None
+    }
+
     pub fn mass_kg(&self, density_kg_m3: f32) -> f32 {
         self.volume_m3 * density_kg_m3
     }
@@ -324,6 +366,27 @@ mod tests {
             MassProperties::of_closed_mesh(&cube),
             Err(PhysicsError::NoVolume { .. })
         ));
+    }
+
+    #[test]
+    fn what_an_engine_cannot_simulate_is_said() {
+        let good =
+            MassProperties::of_closed_mesh(&cuboid(Vec3::ZERO, Vec3::new(0.1, 0.2, 0.3))).unwrap();
+        assert_eq!(good.implausible(), None);
+        // The subscriber's old fallback body on slambook: a negative diagonal.
+        let mut negative = good;
+        negative.inertia[1][1] = -negative.inertia[1][1];
+        assert!(negative
+            .implausible()
+            .unwrap()
+            .contains("positive definite"));
+        // Positive, but one moment larger than the other two together.
+        let mut lopsided = good;
+        lopsided.inertia = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 3.0]];
+        assert!(lopsided.implausible().unwrap().contains("triangle"));
+        let mut nan = good;
+        nan.centre_of_mass.x = f32::NAN;
+        assert!(nan.implausible().is_some());
     }
 
     #[test]

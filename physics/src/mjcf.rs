@@ -6,8 +6,10 @@
 //! - one collision `<geom type="mesh">` per convex part: MuJoCo collides the convex hull of
 //!   any mesh, so a concave visual mesh would collide as its hull; the parts are the
 //!   decomposition (`crate::convex`);
-//! - collision geoms do not collide with other bodies' unless [`MjcfConfig::bodies_collide`]
-//!   (they still do with the supports and with whatever the user adds);
+//! - bodies collide with each other and with the supports, except the pairs the scene lists in
+//!   [`Scene::exclusions`] (they start inside each other), each a `<contact><exclude>`; with
+//!   [`MjcfConfig::bodies_collide`] off they collide only with the supports and what the user
+//!   adds;
 //! - the visual mesh as a `<geom>` of class `visual`: `contype="0" conaffinity="0"` (never
 //!   collides), `group="1"`, no mass;
 //! - a dynamic body also gets a `<freejoint>` and an explicit `<inertial>` (`pos` = centre of
@@ -15,9 +17,10 @@
 //!   properties times [`MjcfConfig::density_kg_m3`], so MuJoCo never infers inertia from the
 //!   hulls (which over-approximate); a static body has neither and is welded to the world.
 //!
-//! Supports are `<geom type="plane">` in the world body: MuJoCo's plane is the local XY plane
-//! with +Z its normal, so the geom's quaternion turns +Z onto the support's normal. Gravity
-//! is a vector (`<option gravity>`): the world's Z need not be up.
+//! A support is a static `<body>` (no joint: welded to the world) holding one `<geom
+//! type="box">`, the slab of [`SceneSupport`]: a finite box, because MuJoCo's plane is an
+//! infinite half-space and a desk's would swallow the floor under it. Gravity is a vector
+//! (`<option gravity>`): the world's Z need not be up.
 //!
 //! Names are sanitised to `[A-Za-z0-9_.-]` (anything else becomes `_`) and made unique with a
 //! numeric suffix, so they are safe both as XML attribute values and as file names.
@@ -35,7 +38,8 @@ use crate::error::PhysicsError;
 use crate::scene::{check_scene, number, numbers, sanitise, write_scene_files, UniqueNames};
 // The scene's types, here too: the MJCF writer's callers name them through this module.
 pub use crate::scene::{
-    Motion, Scene, SceneBody, ScenePlane, WorldFromBody, WrittenScene, MESH_FOLDER,
+    Exclusion, Member, Motion, Scene, SceneBody, SceneSupport, WorldFromBody, WrittenScene,
+    MESH_FOLDER,
 };
 
 /// How to write a scene.
@@ -48,12 +52,11 @@ pub struct MjcfConfig {
     pub timestep_s: f32,
     /// The `<mujoco model>` name.
     pub model_name: String,
-    /// Whether the bodies collide with each other (default no). A tacmesh body is a
-    /// conservative collision proxy: a one-view object's proxy takes in the unseen space behind
-    /// it, where another object's may reach too (on the milk carton recording two proxies start
-    /// 89 mm into each other, and MuJoCo threw the lighter one 0.4 m). Each still collides with
-    /// the supports and with anything the user adds (a probe, a robot's fingers: MuJoCo's
-    /// default `contype` and `conaffinity` of 1).
+    /// Whether the bodies collide with each other (default yes). Pairs that start inside each
+    /// other (a one-view object's proxy takes in the unseen space behind it, where another
+    /// object's may reach too) are kept apart by [`Scene::exclusions`] instead. Off, each
+    /// body collides only with the supports and with anything the user adds (a probe, a
+    /// robot's fingers: MuJoCo's default `contype` and `conaffinity` of 1).
     pub bodies_collide: bool,
 }
 
@@ -63,7 +66,7 @@ impl Default for MjcfConfig {
             density_kg_m3: 500.0,
             timestep_s: 0.002,
             model_name: "tacmesh".into(),
-            bodies_collide: false,
+            bodies_collide: true,
         }
     }
 }
@@ -77,7 +80,8 @@ pub struct MjcfDocument {
 }
 
 fn mjcf_quat(q: Quat) -> String {
-    let q = q.normalize();
+    // q and −q are the same rotation: the one with w ≥ 0 is written.
+    let q = if q.w < 0.0 { -q } else { q }.normalize();
     numbers(&[q.w, q.x, q.y, q.z])
 }
 
@@ -105,23 +109,27 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
     let mut world = String::new();
 
     // `write!` to a String cannot fail; the results are ignored on purpose below.
+    let mut support_names = Vec::with_capacity(scene.supports.len());
     for support in &scene.supports {
         let name = names.claim(&support.name);
-        let normal = support.normal_in_world.normalize();
-        let quat = Quat::from_rotation_arc(Vec3::Z, normal);
-        let half = support.drawn_half_size_m.max(0.0);
+        let half = support.box_half_size_m();
+        // The body sits at the slab's centre, turned so its z is the support's normal.
         let _ = writeln!(
             world,
-            r#"    <geom name="{name}" class="support" type="plane" pos="{}" quat="{}" size="{} {} 0.05"/>"#,
-            numbers(&support.point_in_world.to_array()),
-            mjcf_quat(quat),
-            number(half),
-            number(half),
+            r#"    <body name="{name}" pos="{}" quat="{}">
+      <geom name="{name}_slab" class="support" type="box" size="{}"/>
+    </body>"#,
+            numbers(&support.box_centre_in_world().to_array()),
+            mjcf_quat(support.rotation()),
+            numbers(&half.to_array()),
         );
+        support_names.push(name);
     }
 
+    let mut body_names = Vec::with_capacity(scene.bodies.len());
     for body in &scene.bodies {
         let name = names.claim(&body.name);
+        body_names.push(name.clone());
         let pose = body.world_from_body;
         let _ = writeln!(
             world,
@@ -171,6 +179,25 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
         let _ = writeln!(world, "    </body>");
     }
 
+    let mut contact = String::new();
+    for exclusion in &scene.exclusions {
+        let name = |m: Member| match m {
+            Member::Support(k) => &support_names[k],
+            Member::Body(k) => &body_names[k],
+        };
+        let _ = writeln!(
+            contact,
+            r#"    <exclude body1="{}" body2="{}"/> <!-- {} mm inside each other at the start -->"#,
+            name(exclusion.a),
+            name(exclusion.b),
+            number((exclusion.depth_m * 1e3).round()),
+        );
+    }
+    let contact = if contact.is_empty() {
+        String::new()
+    } else {
+        format!("  <contact>\n{contact}  </contact>\n")
+    };
     let collision_bits = if config.bodies_collide {
         ""
     } else {
@@ -202,7 +229,7 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
   <worldbody>
     <light name="tacmesh_light" directional="true" dir="{}" pos="{}"/>
 {world}  </worldbody>
-</mujoco>"#,
+{contact}</mujoco>"#,
         sanitise(&config.model_name),
         config.density_kg_m3,
         config.timestep_s,
@@ -256,16 +283,19 @@ mod tests {
     fn two_body_scene() -> Scene {
         Scene {
             gravity_m_s2: Vec3::new(0.0, 0.0, -9.81),
-            supports: vec![ScenePlane {
+            supports: vec![SceneSupport {
                 name: "table".into(),
-                point_in_world: Vec3::ZERO,
+                top_centre_in_world: Vec3::ZERO,
                 normal_in_world: Vec3::Z,
-                drawn_half_size_m: 1.0,
+                along_in_world: Vec3::X,
+                half_size_m: glam::Vec2::splat(1.0),
+                thickness_m: 0.05,
             }],
             bodies: vec![
                 body("box <1>", Motion::Dynamic, 0.05),
                 body("shelf", Motion::Static, 0.5),
             ],
+            exclusions: vec![],
         }
     }
 
@@ -276,8 +306,9 @@ mod tests {
         let xml = std::fs::read_to_string(&written.scene_file).unwrap();
         assert!(xml.starts_with("<mujoco model=\"tacmesh\">"));
         assert!(xml.trim_end().ends_with("</mujoco>"));
-        assert_eq!(xml.matches("<body ").count(), 2);
-        assert_eq!(xml.matches("</body>").count(), 2);
+        // The two bodies and the table's slab, a static body of its own.
+        assert_eq!(xml.matches("<body ").count(), 3);
+        assert_eq!(xml.matches("</body>").count(), 3);
         // Only the dynamic body moves and has an inertia: 0.001 m³ at 500 kg/m³.
         assert_eq!(xml.matches("<freejoint").count(), 1);
         assert_eq!(xml.matches("<inertial").count(), 1);
@@ -287,10 +318,16 @@ mod tests {
             xml.contains(r#"<body name="box__1_" pos="0 0 0.05" quat="0.9887711 0 0 0.14943814">"#),
             "{xml}"
         );
+        // The table is a finite slab, 5 cm thick under its top at z = 0.
         assert!(
-            xml.contains(r#"type="plane" pos="0 0 0" quat="1 0 0 0""#),
+            xml.contains(r#"<body name="table" pos="0 0 -0.025" quat="1 0 0 0">"#),
             "{xml}"
         );
+        assert!(
+            xml.contains(r#"class="support" type="box" size="1 1 0.025""#),
+            "{xml}"
+        );
+        assert!(!xml.contains(r#"type="plane""#), "{xml}");
         // A visual and a collision mesh per body, every one written.
         assert_eq!(xml.matches(r#"class="visual" type="mesh""#).count(), 2);
         assert_eq!(xml.matches(r#"class="collision" type="mesh""#).count(), 2);
@@ -303,28 +340,42 @@ mod tests {
         }
     }
 
-    /// Bodies collide with the supports and a user's geoms, not with each other, unless asked.
+    /// Bodies collide with each other, except the pairs that start inside each other; asked
+    /// to, they collide only with the supports and a user's geoms.
     #[test]
-    fn bodies_do_not_collide_with_each_other_unless_asked() {
-        let apart = mjcf_document(&two_body_scene(), &MjcfConfig::default())
-            .unwrap()
-            .xml;
+    fn bodies_collide_with_each_other_but_for_the_excluded_pairs() {
+        let mut scene = two_body_scene();
+        scene.exclusions.push(Exclusion {
+            a: Member::Body(0),
+            b: Member::Support(0),
+            depth_m: 0.0123,
+        });
+        let xml = mjcf_document(&scene, &MjcfConfig::default()).unwrap().xml;
+        assert!(!xml.contains(r#"contype="2""#), "{xml}");
         assert!(
-            apart.contains(r#"<geom contype="2" conaffinity="1" group="3""#),
-            "{apart}"
+            xml.contains(
+                r#"<contact>
+    <exclude body1="box__1_" body2="table"/> <!-- 12 mm inside each other at the start -->
+  </contact>"#
+            ),
+            "{xml}"
         );
-        let together = MjcfConfig {
-            bodies_collide: true,
+        let apart = MjcfConfig {
+            bodies_collide: false,
             ..MjcfConfig::default()
         };
-        let xml = mjcf_document(&two_body_scene(), &together).unwrap().xml;
-        assert!(!xml.contains(r#"contype="2""#), "{xml}");
+        let xml = mjcf_document(&two_body_scene(), &apart).unwrap().xml;
+        assert!(
+            xml.contains(r#"<geom contype="2" conaffinity="1" group="3""#),
+            "{xml}"
+        );
+        assert!(!xml.contains("<contact>"), "{xml}");
     }
 
     #[test]
-    fn plane_quaternion_turns_z_onto_the_normal() {
+    fn a_slab_is_turned_so_its_z_is_the_normal() {
         let mut scene = two_body_scene();
-        scene.supports[0].normal_in_world = Vec3::new(0.0, 2.0, 0.0);
+        scene.supports[0].normal_in_world = Vec3::new(0.0, 1.0, 0.0);
         let xml = mjcf_document(&scene, &MjcfConfig::default()).unwrap().xml;
         // A quarter turn about -X takes +Z to +Y: w = cos 45°, x = -sin 45°.
         assert!(xml.contains(r#"quat="0.7071068 -0.7071068 0 0""#), "{xml}");

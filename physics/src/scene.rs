@@ -54,18 +54,101 @@ pub struct SceneBody {
     pub motion: Motion,
 }
 
-/// An infinite support plane (a table top, the floor) that bodies rest on.
+/// A support (a table top, the floor, a shelf) as a slab: a box whose top face is the smallest
+/// rectangle around what was seen of it, grown by a margin, and `thickness_m` deep under it. A
+/// finite box, not an infinite plane: an engine treats a plane as a half-space, and a desk's
+/// plane then swallows the floor and what stands on it (and throws it out at 14 m/s).
 #[derive(Debug, Clone, PartialEq)]
-pub struct ScenePlane {
+pub struct SceneSupport {
     /// A name or id; sanitised and made unique in the file.
     pub name: String,
-    /// A point on the plane, world frame, metres.
-    pub point_in_world: Vec3,
-    /// The side bodies rest on, world frame (normalised here; must not be zero).
+    /// The centre of the top face, world frame, metres.
+    pub top_centre_in_world: Vec3,
+    /// Up: the side bodies rest on, world frame, unit.
     pub normal_in_world: Vec3,
-    /// Half the side of the square drawn, metres (0: drawn infinite). Collisions are always
-    /// with the infinite plane.
-    pub drawn_half_size_m: f32,
+    /// The top face's first axis, in the plane, world frame, unit.
+    pub along_in_world: Vec3,
+    /// Half the top face's sides: along `along_in_world`, and along `normal × along`.
+    pub half_size_m: glam::Vec2,
+    /// How deep the slab reaches under its top face, metres.
+    pub thickness_m: f32,
+}
+
+/// How far a support's slab reaches beyond what was seen of it, metres: the fan of a table
+/// ends where the segmentation stopped seeing it, a little short of its edge.
+pub const SUPPORT_MARGIN_M: f32 = 0.02;
+
+/// How deep a support's slab reaches under its top, metres: thick enough that nothing resting
+/// on it pushes through in a time step, thin enough to stay clear of what stands under a desk.
+pub const SUPPORT_THICKNESS_M: f32 = 0.05;
+
+impl SceneSupport {
+    /// The slab of a support whose plane passes through `point_in_world` with `normal_in_world`
+    /// (unit), bounded by `outline_in_world` (what was seen of it: a fan's vertices) projected
+    /// onto the plane, plus `margin_m`. `None` when the outline spans no area.
+    pub fn from_outline(
+        name: impl Into<String>,
+        point_in_world: Vec3,
+        normal_in_world: Vec3,
+        outline_in_world: &[Vec3],
+        margin_m: f32,
+        thickness_m: f32,
+    ) -> Option<SceneSupport> {
+        let normal = normal_in_world.try_normalize()?;
+        let u = normal.any_orthonormal_vector();
+        let v = normal.cross(u);
+        let flat: Vec<glam::Vec2> = outline_in_world
+            .iter()
+            .map(|p| glam::Vec2::new((*p - point_in_world).dot(u), (*p - point_in_world).dot(v)))
+            .collect();
+        let (centre, axis, half) = crate::support::min_area_rectangle(&flat)?;
+        Some(SceneSupport {
+            name: name.into(),
+            top_centre_in_world: point_in_world + u * centre.x + v * centre.y,
+            normal_in_world: normal,
+            along_in_world: (u * axis.x + v * axis.y).normalize(),
+            half_size_m: half + glam::Vec2::splat(margin_m.max(0.0)),
+            thickness_m,
+        })
+    }
+
+    /// The slab's orientation: its x along `along_in_world`, its z along the normal.
+    pub fn rotation(&self) -> Quat {
+        let z = self.normal_in_world.normalize_or_zero();
+        let x = (self.along_in_world - z * self.along_in_world.dot(z)).normalize_or_zero();
+        Quat::from_mat3(&glam::Mat3::from_cols(x, z.cross(x), z)).normalize()
+    }
+
+    /// The centre of the slab (half its thickness under the top face's centre).
+    pub fn box_centre_in_world(&self) -> Vec3 {
+        self.top_centre_in_world - self.normal_in_world * (0.5 * self.thickness_m)
+    }
+
+    /// Half the box's sides in its own frame (x, y along the top face, z through it).
+    pub fn box_half_size_m(&self) -> Vec3 {
+        Vec3::new(
+            self.half_size_m.x,
+            self.half_size_m.y,
+            0.5 * self.thickness_m,
+        )
+    }
+}
+
+/// Which member of a scene: a support or a body, by its index in [`Scene::supports`] or
+/// [`Scene::bodies`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Member {
+    Support(usize),
+    Body(usize),
+}
+
+/// Two members that start inside each other by `depth_m`: they do not collide with each other
+/// (each still collides with everything else), or the engine would throw them apart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Exclusion {
+    pub a: Member,
+    pub b: Member,
+    pub depth_m: f32,
 }
 
 /// What a scene file holds.
@@ -73,8 +156,10 @@ pub struct ScenePlane {
 pub struct Scene {
     /// Gravity in the world frame, m/s² (for example `-9.81 * up`).
     pub gravity_m_s2: Vec3,
-    pub supports: Vec<ScenePlane>,
+    pub supports: Vec<SceneSupport>,
     pub bodies: Vec<SceneBody>,
+    /// Pairs that do not collide with each other (see `crate::overlap::starting_overlaps`).
+    pub exclusions: Vec<Exclusion>,
 }
 /// What a writer wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -159,11 +244,30 @@ pub(crate) fn check_scene(scene: &Scene, density_kg_m3: f32) -> Result<(), Physi
         return Err(PhysicsError::BadDensity { density_kg_m3 });
     }
     for support in &scene.supports {
-        let normal_ok = support.normal_in_world.length() > 1e-6;
-        if !normal_ok || !support.point_in_world.is_finite() {
+        let normal_ok = support.normal_in_world.length() > 1e-6
+            && support.along_in_world.length() > 1e-6
+            && support.normal_in_world.is_finite()
+            && support.along_in_world.is_finite();
+        let size_ok = support.half_size_m.is_finite()
+            && support.half_size_m.min_element() > 0.0
+            && support.thickness_m.is_finite()
+            && support.thickness_m > 0.0;
+        if !normal_ok || !support.top_centre_in_world.is_finite() || !size_ok {
             return Err(PhysicsError::InvalidScene(format!(
-                "support {:?} needs a finite point and a non-zero normal",
+                "support {:?} needs a finite place, a non-zero normal and axis, and a positive \
+                 size and thickness",
                 support.name
+            )));
+        }
+    }
+    for exclusion in &scene.exclusions {
+        let known = |m: Member| match m {
+            Member::Support(k) => k < scene.supports.len(),
+            Member::Body(k) => k < scene.bodies.len(),
+        };
+        if !known(exclusion.a) || !known(exclusion.b) {
+            return Err(PhysicsError::InvalidScene(format!(
+                "an exclusion names a member the scene does not have: {exclusion:?}"
             )));
         }
     }
@@ -190,6 +294,12 @@ pub(crate) fn check_scene(scene: &Scene, density_kg_m3: f32) -> Result<(), Physi
                 return Err(PhysicsError::NoVolume {
                     volume_m3: f64::from(body.mass.volume_m3),
                 });
+            }
+            if let Some(why) = body.mass.implausible() {
+                return Err(PhysicsError::InvalidScene(format!(
+                    "dynamic body {:?} cannot be simulated: {why}",
+                    body.name
+                )));
             }
         }
     }

@@ -13,14 +13,19 @@
 //!   [`SdfConfig::density_kg_m3`], the inertia tensor's six elements about the centre of mass
 //!   (the same signed elements as MJCF's `fullinertia`). Gazebo takes them; PyBullet's
 //!   `loadSDF` takes the mass but computes its own inertia from the collision shapes;
-//! - bodies do not collide with each other unless [`SdfConfig::bodies_collide`]: each body's
-//!   collisions get a `collide_bitmask` of their own bit and the supports all bits (Gazebo
-//!   collides two shapes when their masks share a bit). There are 16 bits: the 17th body
-//!   shares the first one's. PyBullet does not read the mask; its user filters pairs with
+//! - bodies collide with each other unless [`SdfConfig::bodies_collide`] is off: then each
+//!   body's collisions get a `collide_bitmask` of their own bit and the supports all bits
+//!   (Gazebo collides two shapes when their masks share a bit). There are 16 bits: the 17th
+//!   body shares the first one's. SDFormat has no filter for one pair, so the pairs of
+//!   [`Scene::exclusions`] (they start inside each other) are listed in a comment: PyBullet
+//!   does not read masks either, and its user filters those pairs with
 //!   `setCollisionFilterPair`;
-//! - a support is a static model with a `<plane>` collision (`<normal>` in the world, a
-//!   `<size>` drawn);
-//! - gravity is the world's `<gravity>` vector (its Z need not be up).
+//! - a support is a static model with a `<box>` collision, the slab of [`SceneSupport`]
+//!   (`crate::scene::SceneSupport`): finite, because an engine's plane is an infinite
+//!   half-space;
+//! - gravity is the world's `<gravity>` vector (its Z need not be up). Gazebo reads it;
+//!   PyBullet's `loadSDF` does not (its user calls `setGravity` with the same vector, which
+//!   the file's first comment gives).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -30,7 +35,7 @@ use tacmesh_source::TriMesh;
 
 use crate::error::PhysicsError;
 use crate::scene::{
-    check_scene, number, numbers, sanitise, write_scene_files, Motion, Scene, UniqueNames,
+    check_scene, number, numbers, sanitise, write_scene_files, Member, Motion, Scene, UniqueNames,
     WrittenScene, MESH_FOLDER,
 };
 
@@ -41,9 +46,8 @@ pub struct SdfConfig {
     pub density_kg_m3: f32,
     /// The `<world name>`.
     pub world_name: String,
-    /// Whether the bodies collide with each other (default no, for the reason
-    /// `crate::MjcfConfig::bodies_collide` gives: a one-view object's proxy may reach into
-    /// another's unseen space).
+    /// Whether the bodies collide with each other (default yes, as
+    /// `crate::MjcfConfig::bodies_collide`).
     pub bodies_collide: bool,
 }
 
@@ -52,7 +56,7 @@ impl Default for SdfConfig {
         Self {
             density_kg_m3: 500.0,
             world_name: "tacmesh".into(),
-            bodies_collide: false,
+            bodies_collide: true,
         }
     }
 }
@@ -91,15 +95,12 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
     let mut world = String::new();
 
     // `write!` to a String cannot fail; the results are ignored on purpose below.
+    let mut support_names = Vec::with_capacity(scene.supports.len());
     for support in &scene.supports {
         let name = names.claim(&support.name);
-        let normal = numbers(&support.normal_in_world.normalize().to_array());
-        let side = 2.0 * support.drawn_half_size_m.max(0.0);
-        let plane = format!(
-            "<geometry><plane><normal>{normal}</normal><size>{} {}</size></plane></geometry>",
-            number(side),
-            number(side),
-        );
+        support_names.push(name.clone());
+        let size = numbers(&(2.0 * support.box_half_size_m()).to_array());
+        let plane = format!("<geometry><box><size>{size}</size></box></geometry>");
         let _ = writeln!(
             world,
             r#"    <model name="{name}">
@@ -110,12 +111,14 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
         <visual name="{name}_visual">{plane}</visual>
       </link>
     </model>"#,
-            sdf_pose(Quat::IDENTITY, support.point_in_world),
+            sdf_pose(support.rotation(), support.box_centre_in_world()),
         );
     }
 
+    let mut body_names = Vec::with_capacity(scene.bodies.len());
     for (index, body) in scene.bodies.iter().enumerate() {
         let name = names.claim(&body.name);
+        body_names.push(name.clone());
         let pose = body.world_from_body;
         let _ = writeln!(
             world,
@@ -182,18 +185,41 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
     } else {
         format!(" Supports collide with every body (collide_bitmask {ALL_BITS:#x}, the default);\n       bodies not with each other (a bit each).")
     };
+    let mut excluded = String::new();
+    for exclusion in &scene.exclusions {
+        let name = |m: Member| match m {
+            Member::Support(k) => &support_names[k],
+            Member::Body(k) => &body_names[k],
+        };
+        let _ = write!(
+            excluded,
+            "\n       {} and {} ({} mm)",
+            name(exclusion.a),
+            name(exclusion.b),
+            number((exclusion.depth_m * 1e3).round()),
+        );
+    }
+    if !excluded.is_empty() {
+        excluded = format!(
+            "\n       These pairs start inside each other and are not to collide with each other \
+             (SDFormat\n       cannot say so; in PyBullet: setCollisionFilterPair(a, b, -1, -1, 0)):{excluded}"
+        );
+    }
     let mut xml = String::new();
     let _ = writeln!(
         xml,
         r#"<?xml version="1.0"?>
 <sdf version="1.6">
   <!-- Written by tacmesh: bodies at their poses, collision from convex parts, inertia from
-       the meshes at {} kg/m3.{supports_mask} -->
+       the meshes at {} kg/m3.{supports_mask}
+       Gravity {} m/s2: PyBullet's loadSDF does not read <gravity>; call setGravity({}).{excluded} -->
   <world name="{}">
     <gravity>{}</gravity>
 {world}  </world>
 </sdf>"#,
         config.density_kg_m3,
+        numbers(&scene.gravity_m_s2.to_array()),
+        numbers(&scene.gravity_m_s2.to_array()).replace(' ', ", "),
         sanitise(&config.world_name),
         numbers(&scene.gravity_m_s2.to_array()),
     );
@@ -215,7 +241,7 @@ pub fn write_sdf(
 mod tests {
     use super::*;
     use crate::convex::{convex_parts, ConvexConfig};
-    use crate::scene::{SceneBody, ScenePlane, WorldFromBody};
+    use crate::scene::{Exclusion, SceneBody, SceneSupport, WorldFromBody};
     use tacmesh_sim::cube;
 
     fn scene(bodies: usize) -> Scene {
@@ -223,11 +249,13 @@ mod tests {
         let parts = convex_parts(&mesh, &ConvexConfig::default()).unwrap();
         Scene {
             gravity_m_s2: Vec3::new(0.0, -9.81, 0.0),
-            supports: vec![ScenePlane {
+            supports: vec![SceneSupport {
                 name: "table".into(),
-                point_in_world: Vec3::ZERO,
-                normal_in_world: Vec3::new(0.0, 2.0, 0.0),
-                drawn_half_size_m: 1.0,
+                top_centre_in_world: Vec3::ZERO,
+                normal_in_world: Vec3::Y,
+                along_in_world: Vec3::X,
+                half_size_m: glam::Vec2::splat(1.0),
+                thickness_m: 0.04,
             }],
             bodies: (0..bodies)
                 .map(|k| SceneBody {
@@ -246,6 +274,7 @@ mod tests {
                     },
                 })
                 .collect(),
+            exclusions: vec![],
         }
     }
 
@@ -263,16 +292,19 @@ mod tests {
         assert_eq!(xml.matches("<inertial>").count(), 1);
         // 0.001 m³ at 500 kg/m³; a cube's Ixx = m (a² + a²) / 12 about its centre.
         assert!(xml.contains("<mass>0.5</mass>"), "{xml}");
+        // The table: a 2 m × 2 m slab 4 cm thick under its top at y = 0 (its z turned onto +y).
         assert!(
-            xml.contains("<normal>0 1 0</normal><size>2 2</size>"),
+            xml.contains("<geometry><box><size>2 2 0.04</size></box></geometry>"),
             "{xml}"
         );
-        // Names sanitised, a collision per part with its own bit, a visual per body.
+        assert!(
+            xml.contains("<pose>0 -0.02 0 -1.5707964 0 0</pose>"),
+            "{xml}"
+        );
+        assert!(xml.contains("call setGravity(0, -9.81, 0)"), "{xml}");
+        // Names sanitised, a collision per part, a visual per body.
         assert!(xml.contains(r#"<model name="box_1">"#), "{xml}");
-        assert!(
-            xml.contains("<collide_bitmask>2</collide_bitmask>"),
-            "{xml}"
-        );
+        assert!(!xml.contains("collide_bitmask"), "{xml}");
         assert_eq!(xml.matches("<visual name=\"box_").count(), 2);
         assert_eq!(written.mesh_files.len(), 4);
         for file in &written.mesh_files {
@@ -332,14 +364,22 @@ mod tests {
     }
 
     #[test]
-    fn bodies_collide_when_asked_and_masks_wrap_after_sixteen() {
-        let together = SdfConfig {
-            bodies_collide: true,
+    fn pairs_that_start_inside_each_other_are_named_and_masks_wrap_after_sixteen() {
+        let mut overlapping = scene(2);
+        overlapping.exclusions.push(Exclusion {
+            a: Member::Body(0),
+            b: Member::Body(1),
+            depth_m: 0.02,
+        });
+        let xml = sdf_document(&overlapping, &SdfConfig::default())
+            .unwrap()
+            .xml;
+        assert!(xml.contains("box_0 and box_1 (20 mm)"), "{xml}");
+        let apart = SdfConfig {
+            bodies_collide: false,
             ..SdfConfig::default()
         };
-        let xml = sdf_document(&scene(2), &together).unwrap().xml;
-        assert!(!xml.contains("collide_bitmask"), "{xml}");
-        let xml = sdf_document(&scene(18), &SdfConfig::default()).unwrap().xml;
+        let xml = sdf_document(&scene(18), &apart).unwrap().xml;
         // Body 16 (the 17th) takes body 0's bit.
         assert!(xml.contains(&format!(
             "<collide_bitmask>{}</collide_bitmask>",

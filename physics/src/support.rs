@@ -108,6 +108,37 @@ pub fn rests_on(parts: &[TriMesh], centre_of_mass: Vec3, support: SupportPlane) 
     footprint.len() >= 3 && inside_convex(&footprint, flat(centre_of_mass))
 }
 
+/// The smallest rectangle (by area) around `points` in a plane: its centre, its first axis
+/// (unit) and its half sides along that axis and the one across. One side of the smallest
+/// rectangle lies along an edge of the points' convex hull (Freeman & Shapira 1975), so each
+/// edge's direction is tried. `None` for fewer than three points that are not all on a line.
+pub fn min_area_rectangle(points: &[glam::Vec2]) -> Option<(glam::Vec2, glam::Vec2, glam::Vec2)> {
+    let hull = convex_polygon(points.to_vec());
+    if hull.len() < 3 {
+        return None;
+    }
+    let mut best: Option<(f32, glam::Vec2, glam::Vec2, glam::Vec2)> = None;
+    for (k, &a) in hull.iter().enumerate() {
+        let Some(axis) = (hull[(k + 1) % hull.len()] - a).try_normalize() else {
+            continue;
+        };
+        let across = axis.perp();
+        let (mut lo, mut hi) = (glam::Vec2::splat(f32::INFINITY), glam::Vec2::NEG_INFINITY);
+        for p in &hull {
+            let q = glam::Vec2::new(p.dot(axis), p.dot(across));
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+        let area = (hi.x - lo.x) * (hi.y - lo.y);
+        if best.is_none_or(|b| area < b.0) {
+            let middle = 0.5 * (lo + hi);
+            let centre = axis * middle.x + across * middle.y;
+            best = Some((area, centre, axis, 0.5 * (hi - lo)));
+        }
+    }
+    best.map(|(_, centre, axis, half)| (centre, axis, half))
+}
+
 /// The convex hull of points in the plane, counter-clockwise (Andrew's monotone chain). By
 /// hand: a footprint has a few dozen points, and none of our dependencies has a 2-D hull.
 fn convex_polygon(mut points: Vec<glam::Vec2>) -> Vec<glam::Vec2> {
@@ -219,6 +250,38 @@ mod tests {
         ];
         assert!(rests_on(&l_shape, Vec3::new(0.08, 0.05, 0.1), table));
         assert!(!rests_on(&l_shape, Vec3::new(0.2, 0.05, 0.12), table));
+    }
+
+    #[test]
+    fn the_smallest_rectangle_of_a_turned_rectangle_is_itself() {
+        let turn = glam::Mat2::from_angle(0.4);
+        let corners = [
+            (-2.0, -1.0),
+            (2.0, -1.0),
+            (2.0, 1.0),
+            (-2.0, 1.0),
+            (0.5, 0.2),
+        ]
+        .map(|(x, y)| turn * glam::Vec2::new(x, y) + glam::Vec2::new(5.0, -3.0));
+        let (centre, axis, half) = min_area_rectangle(&corners).expect("a rectangle");
+        assert!(
+            centre.distance(glam::Vec2::new(5.0, -3.0)) < 1e-4,
+            "{centre}"
+        );
+        let (long, short) = if half.x > half.y {
+            (half.x, half.y)
+        } else {
+            (half.y, half.x)
+        };
+        assert!(
+            (long - 2.0).abs() < 1e-4 && (short - 1.0).abs() < 1e-4,
+            "{half}"
+        );
+        let along = turn * glam::Vec2::X;
+        assert!(axis.dot(along).abs() > 0.9999 || axis.dot(along).abs() < 1e-4);
+        assert!(
+            min_area_rectangle(&[glam::Vec2::ZERO, glam::Vec2::X, 2.0 * glam::Vec2::X]).is_none()
+        );
     }
 
     #[test]

@@ -65,6 +65,15 @@ def test_cube_rests_and_sphere_lands(
     assert SPHERE_RADIUS_M - 0.004 < np.dot(sphere, up) < SPHERE_RADIUS_M + 0.002
     # Nothing is still moving fast (the sphere hit the plane at about 1.7 m/s).
     assert np.max(np.abs(data.qvel)) < 0.2
+    # The desk top is a finite slab 0.4 m up: the cube on it rests there, and the cube on the
+    # floor under it stays on the floor (an infinite plane of the desk would throw it out).
+    on_desk = body_position(model, data, "on_desk")
+    assert np.dot(on_desk, up) == pytest.approx(0.4 + CUBE_HALF_M, abs=0.002)
+    under_desk = body_position(model, data, "under_desk")
+    assert np.dot(under_desk, up) == pytest.approx(CUBE_HALF_M, abs=0.002)
+    for name in ("desk", "table"):
+        slab = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{name}_slab")
+        assert model.geom_type[slab] == mujoco.mjtGeom.mjGEOM_BOX, name
 
 
 def resting_scene(socket_path: Path, out: Path, updates: int) -> tuple[Any, str]:
@@ -93,7 +102,14 @@ def resting_scene(socket_path: Path, out: Path, updates: int) -> tuple[Any, str]
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)) == 1, done.stdout
+    # Supports are finite slabs (boxes), never infinite planes.
+    assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)) == 0, done.stdout
+    slabs = [
+        model.geom(g).name
+        for g in range(model.ngeom)
+        if model.geom(g).name.endswith("_slab")
+    ]
+    assert slabs and all(name.startswith("plane-") for name in slabs), slabs
     start = np.array(data.xpos)
     for _ in range(10 * STEPS):
         mujoco.mj_step(model, data)
@@ -105,12 +121,15 @@ def resting_scene(socket_path: Path, out: Path, updates: int) -> tuple[Any, str]
     return model, done.stdout
 
 
-def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(tmp_path: Path) -> None:
+def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(
+    tmp_path: Path,
+) -> None:
     """The real data: the daemon on a recorded tabletop (PCL's milk carton scene, four things
     on a table and five at the far end of the room, testdata/pointclouds/pcl). Its one-view
     objects' published bodies (shadow volumes) stand on the table and stay; two of them reach
     into each other behind the objects, which the scene's bodies do not collide over, and one
-    (a fragment 20 cm above the table, whose shadow leans off its foot) is held still."""
+    (a fragment 20 cm above the table, whose shadow leans off its foot) is held still.
+    """
     recording = (
         Path(__file__).resolve().parents[2]
         / "testdata/pointclouds/pcl/milk_cartoon_all_small_clorox.pcd"
@@ -124,7 +143,9 @@ def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(tmp_path: Pat
     assert model.nbody - 1 >= 4, printed
     # Bodies follow their shapes off the frame path: some may not have come by then (those
     # objects are their straight-down extrusions in the scene meanwhile).
-    assert sum(line.startswith("body object") for line in printed.splitlines()) >= 2, printed
+    assert (
+        sum(line.startswith("body object") for line in printed.splitlines()) >= 2
+    ), printed
     # Most of them are free bodies; one that does not stand on the table by itself (a fragment
     # held up by another object) is held still (a body without a joint).
     free = int(np.sum(model.body_dofnum[1:] > 0))
@@ -152,4 +173,6 @@ def test_the_subscribers_scene_of_the_demo_rests_on_its_table(
         body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"object-{object_id}")
         assert body >= 0, f"object {object_id} is not in the scene"
         # The printed volume is rounded to 0.01 l.
-        assert model.body_mass[body] == pytest.approx(0.5 * volume_l, abs=0.5 * 0.006), object_id
+        assert model.body_mass[body] == pytest.approx(
+            0.5 * volume_l, abs=0.5 * 0.006
+        ), object_id

@@ -4,10 +4,10 @@ sphere dropped beside it lands, in a z-up world and in a y-up one; a static body
 And the world `tacmesh subscribe --out DIR --sdf` keeps of the daemon's demo scene loads, gives
 every object the mass its MuJoCo scene gives it, and its objects rest on the table.
 
-PyBullet's `loadSDF` reads the models, poses, `<static>`, masses, mesh collisions and planes;
-it computes inertia from the collision shapes itself (Gazebo takes the file's) and ignores
-Gazebo's `collide_bitmask`, so the tests keep the bodies from colliding with each other as the
-file says Gazebo should, with `setCollisionFilterPair`.
+PyBullet's `loadSDF` reads the models, poses, `<static>`, masses, mesh collisions and boxes;
+it computes inertia from the collision shapes itself (Gazebo takes the file's) and does not
+read `<gravity>`; the pairs that start inside each other, which the file's first comment
+lists, are kept from colliding with `setCollisionFilterPair` as that comment says.
 
 The example scene comes from `physics/examples/write_mjcf.rs --sdf`, named by
 TACMESH_MJCF_EXAMPLE (see example_scene.py). Skipped, with the reason, when it is not named or
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import itertools
+import re
 import subprocess
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
@@ -31,7 +31,9 @@ import pytest
 from example_scene import write_example_scene
 from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
 
-pybullet = pytest.importorskip("pybullet", reason="the pybullet package is not installed")
+pybullet = pytest.importorskip(
+    "pybullet", reason="the pybullet package is not installed"
+)
 
 STEP_S = 1.0 / 240.0  # PyBullet's default step
 CUBE_HALF_M = 0.05
@@ -56,10 +58,22 @@ def load_world(path: Path, client: int) -> dict[str, int]:
     ids = pybullet.loadSDF(str(path), physicsClientId=client)
     gravity_text = ElementTree.parse(path).getroot().findtext("world/gravity")
     assert gravity_text is not None, "the world has no gravity"
-    pybullet.setGravity(*[float(g) for g in gravity_text.split()], physicsClientId=client)
-    names = {pybullet.getBodyInfo(body, physicsClientId=client)[1].decode(): body for body in ids}
+    pybullet.setGravity(
+        *[float(g) for g in gravity_text.split()], physicsClientId=client
+    )
+    names = {
+        pybullet.getBodyInfo(body, physicsClientId=client)[1].decode(): body
+        for body in ids
+    }
     assert len(names) == len(ids), "two models share a name"
     return names
+
+
+def excluded_pairs(path: Path) -> list[tuple[str, str]]:
+    """The pairs the world's first comment says are not to collide with each other."""
+    text = path.read_text()
+    comment = text[text.index("<!--") : text.index("-->")]
+    return re.findall(r"^\s+(\S+) and (\S+) \(\d+ mm\)$", comment, flags=re.MULTILINE)
 
 
 def position(body: int, client: int) -> npt.NDArray[np.float64]:
@@ -87,7 +101,15 @@ def test_cube_rests_and_sphere_lands(
     tmp_path: Path, client: int, up_axis: str, up: npt.NDArray[np.float64]
 ) -> None:
     bodies = load_world(write_example_scene(tmp_path, up_axis, sdf=True), client)
-    assert sorted(bodies) == ["cube", "sphere", "table", "wall"]
+    assert sorted(bodies) == [
+        "cube",
+        "desk",
+        "on_desk",
+        "sphere",
+        "table",
+        "under_desk",
+        "wall",
+    ]
     # 0.001 m³ at the writer's default 500 kg/m³; static models have no mass (fixed).
     assert mass(bodies["cube"], client) == pytest.approx(0.5, rel=1e-5)
     assert mass(bodies["wall"], client) == 0.0
@@ -106,6 +128,13 @@ def test_cube_rests_and_sphere_lands(
     # Landed from 0.2 m on its inscribed hull: on the plane, not through it.
     assert SPHERE_RADIUS_M - 0.004 < np.dot(sphere, up) < SPHERE_RADIUS_M + MARGIN_M
     assert np.array_equal(position(bodies["wall"], client), wall_start)
+    # The desk top is a finite slab 0.4 m up, with a cube on it and one on the floor under it.
+    on_desk = position(bodies["on_desk"], client)
+    assert (
+        0.4 + CUBE_HALF_M - 0.002 < np.dot(on_desk, up) < 0.4 + CUBE_HALF_M + MARGIN_M
+    )
+    under_desk = position(bodies["under_desk"], client)
+    assert CUBE_HALF_M - 0.002 < np.dot(under_desk, up) < CUBE_HALF_M + MARGIN_M
 
 
 def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
@@ -131,7 +160,9 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
     )
     assert done.returncode == 0, done.stderr
     bodies = load_world(tmp_path / "scene.sdf", client)
-    objects = {name: body for name, body in bodies.items() if name.startswith("object-")}
+    objects = {
+        name: body for name, body in bodies.items() if name.startswith("object-")
+    }
     # The demo's objects and its table (a static plane).
     assert len(objects) >= 3, done.stdout
     assert [name for name in bodies if name.startswith("plane-")], sorted(bodies)
@@ -144,12 +175,16 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
         for name, body in objects.items():
             mj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
             assert mj_body >= 0, f"{name} is not in the MuJoCo scene"
-            assert mass(body, client) == pytest.approx(model.body_mass[mj_body], rel=1e-5), name
+            assert mass(body, client) == pytest.approx(
+                model.body_mass[mj_body], rel=1e-5
+            ), name
 
-    # Bodies collide with the table, not with each other (their proxies may overlap in the
-    # space no sensor saw), as the file's bitmasks tell Gazebo.
-    for first, second in itertools.combinations(objects.values(), 2):
-        pybullet.setCollisionFilterPair(first, second, -1, -1, 0, physicsClientId=client)
+    # Bodies collide with each other and the table, but for the pairs the file's comment says
+    # start inside each other (their proxies may overlap in the space no sensor saw).
+    for first, second in excluded_pairs(tmp_path / "scene.sdf"):
+        pybullet.setCollisionFilterPair(
+            bodies[first], bodies[second], -1, -1, 0, physicsClientId=client
+        )
     start = {name: position(body, client) for name, body in objects.items()}
     step(client, 4.0)
     moved = {

@@ -242,6 +242,7 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
         written_at: None,
         warned: Default::default(),
         held_still: Default::default(),
+        overlapping: Default::default(),
     });
     // With options of its own, the daemon's first snapshot (under the default options, sent
     // before it read them) is not what was asked for: everything up to the Session answering
@@ -386,6 +387,8 @@ struct PhysicsFiles {
     warned: std::collections::HashSet<u64>,
     /// Objects already said to be held still.
     held_still: std::collections::HashSet<u64>,
+    /// Pairs already said to start inside each other.
+    overlapping: std::collections::HashSet<(String, String)>,
 }
 
 impl PhysicsFiles {
@@ -407,6 +410,15 @@ impl PhysicsFiles {
         for (id, why) in &update.held_still {
             if self.held_still.insert(*id) {
                 tracing::info!("object {id} is static in the physics scene: {why}");
+            }
+        }
+        for (a, b, depth_m) in &update.overlaps {
+            if self.overlapping.insert((a.clone(), b.clone())) {
+                tracing::info!(
+                    "{a} and {b} start {:.0} mm inside each other: they do not collide with \
+                     each other in the physics scene",
+                    depth_m * 1e3
+                );
             }
         }
         let mut keep: std::collections::HashSet<PathBuf> = Default::default();
