@@ -11,6 +11,8 @@ Needs a release build (cargo build --release) and a Python with numpy, mujoco an
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import subprocess
 import sys
@@ -90,13 +92,29 @@ def mujoco_moves(scene: Path) -> dict[str, float]:
     }
 
 
+@contextlib.contextmanager
+def quiet_stdout() -> Any:
+    """Bullet's C++ importer prints its warnings to file descriptor 1; they are not the table."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(null)
+        os.close(saved)
+
+
 def pybullet_moves(scene: Path) -> dict[str, float]:
     import pybullet  # type: ignore[import-not-found]
 
     path = scene / "scene.sdf"
     client = pybullet.connect(pybullet.DIRECT)
     try:
-        ids = pybullet.loadSDF(str(path), physicsClientId=client)
+        with quiet_stdout():
+            ids = pybullet.loadSDF(str(path), physicsClientId=client)
         names = {
             pybullet.getBodyInfo(b, physicsClientId=client)[1].decode(): b for b in ids
         }

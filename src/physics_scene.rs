@@ -34,6 +34,9 @@ use tacmesh_source::TriMesh;
 
 use crate::daemon::planes::FIRST_PLANE_ID;
 
+/// How high above its support an object's parts count as its foot, metres.
+const FOOT_M: f32 = 0.03;
+
 /// Standard gravity, m/s².
 const GRAVITY_M_S2: f32 = 9.806_65;
 
@@ -103,7 +106,7 @@ impl PhysicsScene {
     /// The physics scene of `scene` now: collision parts of new shapes computed, those of
     /// objects gone forgotten.
     pub fn update(&mut self, scene: &Scene) -> PhysicsUpdate {
-        let (supports, outlines): (Vec<WorldSupport>, Vec<Vec<glam::Vec3>>) = scene
+        let (supports, mut outlines): (Vec<WorldSupport>, Vec<Vec<glam::Vec3>>) = scene
             .objects()
             .filter(|o| o.shape.is_support())
             .filter_map(world_support)
@@ -156,6 +159,22 @@ impl PhysicsScene {
             match &self.collisions[&id].parts {
                 Ok((parts, mass, _)) => {
                     let support = support_under(&supports, object, world_from_object);
+                    // What stands on a support is evidence of it: the table goes on under the
+                    // object, where the camera could not see it. Its foot joins the support's
+                    // outline, so that the slab reaches under it.
+                    if let Some(k) =
+                        tacmesh_physics::support_under(&supports, &object.world_mesh().vertices)
+                            .and_then(|s| supports.iter().position(|t| t.object_id == s.object_id))
+                    {
+                        let on = &supports[k];
+                        outlines[k].extend(
+                            parts
+                                .iter()
+                                .flat_map(|part| part.vertices.iter())
+                                .map(|&v| world_from_object.transform_point3(v))
+                                .filter(|&v| on.normal.dot(v - on.point) < FOOT_M),
+                        );
+                    }
                     let plausible = plausible_mass(parts, mass);
                     let motion = match (support, &plausible) {
                         (_, Err(why)) => {
