@@ -1,0 +1,725 @@
+//! Primitives where an object is one: a box, a cylinder (standing or lying) or a sphere fitted
+//! to what was seen of it. A physics engine collides primitives exactly and cheaply, with true
+//! contact normals, and their mass properties are those of the whole object, where a one-view
+//! shell's shadow volume weighs two to twenty times the truth.
+//!
+//! A fit is accepted only when every part of what was seen is explained: the 95th percentile
+//! of the seen points' distances from the primitive's surface within the caller's bound (the
+//! shape's residual bound and the sensor's noise), and the primitive resting on the support the
+//! object stands on. A box is fitted only when its top was seen (else its depth is a guess),
+//! a standing cylinder only when its wall was.
+//!
+//! The fits are this project's own (no crate fits primitives to partial, one-sided views with a
+//! support): algebraic circle and sphere fits (Kåsa 1976) refined by a few Gauss–Newton steps,
+//! and the footprint's smallest rectangle ([`crate::min_area_rectangle`]).
+
+use glam::{DMat3, DVec3, Mat3, Quat, Vec2, Vec3};
+use tacmesh_source::TriMesh;
+
+use crate::mass::MassProperties;
+use crate::proxy::SupportPlane;
+
+/// What kind of primitive, with its sizes (in its own frame: a box's sides along x, y, z; a
+/// cylinder's axis along z, centred on its origin; a sphere about its origin).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PrimitiveShape {
+    Box { half_m: Vec3 },
+    Cylinder { radius_m: f32, half_height_m: f32 },
+    Sphere { radius_m: f32 },
+}
+
+/// A primitive placed in an object's frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Primitive {
+    pub shape: PrimitiveShape,
+    /// From the primitive's frame to the object's.
+    pub rotation: Quat,
+    pub centre: Vec3,
+    /// The 95th percentile of the seen points' distances from its surface, metres.
+    pub residual_m: f32,
+}
+
+impl PrimitiveShape {
+    /// A short name: `box`, `cylinder`, `sphere`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PrimitiveShape::Box { .. } => "box",
+            PrimitiveShape::Cylinder { .. } => "cylinder",
+            PrimitiveShape::Sphere { .. } => "sphere",
+        }
+    }
+
+    /// Signed distance of `q` (the primitive's frame) from its surface: negative inside.
+    pub fn signed_distance(&self, q: Vec3) -> f32 {
+        match *self {
+            PrimitiveShape::Sphere { radius_m } => q.length() - radius_m,
+            PrimitiveShape::Box { half_m } => {
+                let d = q.abs() - half_m;
+                d.max(Vec3::ZERO).length() + d.max_element().min(0.0)
+            }
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            } => {
+                let d = Vec2::new(
+                    Vec2::new(q.x, q.y).length() - radius_m,
+                    q.z.abs() - half_height_m,
+                );
+                d.max(Vec2::ZERO).length() + d.max_element().min(0.0)
+            }
+        }
+    }
+
+    /// Volume, m³.
+    pub fn volume_m3(&self) -> f32 {
+        match *self {
+            PrimitiveShape::Sphere { radius_m: r } => 4.0 / 3.0 * std::f32::consts::PI * r.powi(3),
+            PrimitiveShape::Box { half_m } => 8.0 * half_m.x * half_m.y * half_m.z,
+            PrimitiveShape::Cylinder {
+                radius_m: r,
+                half_height_m: h,
+            } => std::f32::consts::PI * r * r * 2.0 * h,
+        }
+    }
+
+    /// Principal moments of inertia about the centre at unit density (m⁵), along x, y, z.
+    fn principal_moments(&self) -> Vec3 {
+        let v = self.volume_m3();
+        match *self {
+            PrimitiveShape::Sphere { radius_m: r } => Vec3::splat(0.4 * v * r * r),
+            PrimitiveShape::Box { half_m } => {
+                let s = 2.0 * half_m;
+                let (x2, y2, z2) = (s.x * s.x, s.y * s.y, s.z * s.z);
+                Vec3::new(y2 + z2, x2 + z2, x2 + y2) * (v / 12.0)
+            }
+            PrimitiveShape::Cylinder {
+                radius_m: r,
+                half_height_m: h,
+            } => {
+                let across = v * (3.0 * r * r + 4.0 * h * h) / 12.0;
+                Vec3::new(across, across, 0.5 * v * r * r)
+            }
+        }
+    }
+}
+
+impl Primitive {
+    /// Distance of `p` (the object's frame) from the surface, signed: negative inside.
+    pub fn signed_distance(&self, p: Vec3) -> f32 {
+        self.shape
+            .signed_distance(self.rotation.inverse() * (p - self.centre))
+    }
+
+    /// Mass properties at unit density, in the object's frame.
+    pub fn mass(&self) -> MassProperties {
+        let r = Mat3::from_quat(self.rotation);
+        let inertia = r * Mat3::from_diagonal(self.shape.principal_moments()) * r.transpose();
+        MassProperties {
+            volume_m3: self.shape.volume_m3(),
+            centre_of_mass: self.centre,
+            inertia: [
+                inertia.row(0).to_array(),
+                inertia.row(1).to_array(),
+                inertia.row(2).to_array(),
+            ],
+        }
+    }
+}
+
+/// Points to judge a fit by: a mesh's vertices, edge midpoints and triangle centroids (a
+/// simplified mesh has few vertices on large flat triangles).
+pub fn surface_points(mesh: &TriMesh) -> Vec<Vec3> {
+    let mut points = mesh.vertices.clone();
+    for t in &mesh.triangles {
+        let corner = |k: usize| mesh.vertices.get(t[k] as usize).copied();
+        let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
+            continue;
+        };
+        points.extend([
+            (a + b) * 0.5,
+            (b + c) * 0.5,
+            (c + a) * 0.5,
+            (a + b + c) / 3.0,
+        ]);
+    }
+    points
+}
+
+/// The 95th percentile of the points' distances from `primitive`'s surface.
+fn residual(primitive: &Primitive, points: &[Vec3]) -> f32 {
+    let mut d: Vec<f32> = points
+        .iter()
+        .map(|&p| primitive.signed_distance(p).abs())
+        .collect();
+    if d.is_empty() {
+        return f32::INFINITY;
+    }
+    let k = (d.len() * 95 / 100).min(d.len() - 1);
+    *d.select_nth_unstable_by(k, f32::total_cmp).1
+}
+
+/// Two unit vectors spanning the support's plane.
+fn plane_axes(normal: Vec3) -> (Vec3, Vec3) {
+    let u = normal.any_orthonormal_vector();
+    (u, normal.cross(u))
+}
+
+/// A circle through 2-D points: Kåsa's algebraic fit, then Gauss–Newton on the geometric
+/// distances. `None` for fewer than three points or a degenerate arc.
+fn fit_circle(points: &[Vec2]) -> Option<(Vec2, f32)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let mean = points.iter().copied().sum::<Vec2>() / points.len() as f32;
+    // x² + y² + D x + E y + F = 0, least squares, about the mean for conditioning.
+    let (mut m, mut rhs) = (DMat3::ZERO, DVec3::ZERO);
+    for p in points {
+        let q = (*p - mean).as_dvec2();
+        let row = DVec3::new(q.x, q.y, 1.0);
+        m += DMat3::from_cols(row * row.x, row * row.y, row * row.z);
+        rhs -= row * q.length_squared();
+    }
+    if m.determinant().abs() < 1e-18 {
+        return None;
+    }
+    let s = m.inverse() * rhs;
+    let mut centre = glam::DVec2::new(-s.x / 2.0, -s.y / 2.0);
+    let mut radius = (centre.length_squared() - s.z).max(0.0).sqrt();
+    for _ in 0..10 {
+        // Residual r_i = |q_i − c| − R; Jacobian [−(q−c)/|q−c|, −1].
+        let (mut h, mut g) = (DMat3::ZERO, DVec3::ZERO);
+        for p in points {
+            let d = (*p - mean).as_dvec2() - centre;
+            let len = d.length().max(1e-12);
+            let row = DVec3::new(-d.x / len, -d.y / len, -1.0);
+            let r = len - radius;
+            h += DMat3::from_cols(row * row.x, row * row.y, row * row.z);
+            g += row * r;
+        }
+        if h.determinant().abs() < 1e-18 {
+            break;
+        }
+        let step = -(h.inverse() * g);
+        centre += glam::DVec2::new(step.x, step.y);
+        radius += step.z;
+        if step.length() < 1e-9 {
+            break;
+        }
+    }
+    (radius.is_finite() && radius > 0.0).then(|| (centre.as_vec2() + mean, radius as f32))
+}
+
+/// A sphere through 3-D points (algebraic fit, then Gauss–Newton).
+fn fit_sphere(points: &[Vec3]) -> Option<(Vec3, f32)> {
+    if points.len() < 4 {
+        return None;
+    }
+    let mean = points.iter().copied().sum::<Vec3>() / points.len() as f32;
+    // x² + y² + z² + D x + E y + F z + G = 0 in four unknowns: solved as a 4×4 system.
+    let mut a = [[0.0f64; 4]; 4];
+    let mut b = [0.0f64; 4];
+    for p in points {
+        let q = (*p - mean).as_dvec3();
+        let row = [q.x, q.y, q.z, 1.0];
+        for i in 0..4 {
+            for j in 0..4 {
+                a[i][j] += row[i] * row[j];
+            }
+            b[i] -= row[i] * q.length_squared();
+        }
+    }
+    let s = solve(a, b)?;
+    let mut centre = DVec3::new(-s[0] / 2.0, -s[1] / 2.0, -s[2] / 2.0);
+    let mut radius = (centre.length_squared() - s[3]).max(0.0).sqrt();
+    for _ in 0..10 {
+        let mut h = [[0.0f64; 4]; 4];
+        let mut g = [0.0f64; 4];
+        for p in points {
+            let d = (*p - mean).as_dvec3() - centre;
+            let len = d.length().max(1e-12);
+            let row = [-d.x / len, -d.y / len, -d.z / len, -1.0];
+            let r = len - radius;
+            for i in 0..4 {
+                for j in 0..4 {
+                    h[i][j] += row[i] * row[j];
+                }
+                g[i] -= row[i] * r;
+            }
+        }
+        let Some(step) = solve(h, g) else { break };
+        centre += DVec3::new(step[0], step[1], step[2]);
+        radius += step[3];
+        if step.iter().map(|v| v * v).sum::<f64>() < 1e-18 {
+            break;
+        }
+    }
+    (radius.is_finite() && radius > 0.0).then(|| (centre.as_vec3() + mean, radius as f32))
+}
+
+/// Gaussian elimination with partial pivoting on an N×N system.
+#[allow(clippy::needless_range_loop)] // index loops read like the elimination they are
+fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    for col in 0..N {
+        let pivot = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[pivot][col].abs() < 1e-18 {
+            return None;
+        }
+        a.swap(col, pivot);
+        b.swap(col, pivot);
+        for row in col + 1..N {
+            let f = a[row][col] / a[col][col];
+            for k in col..N {
+                a[row][k] -= f * a[col][k];
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    let mut x = [0.0f64; N];
+    for row in (0..N).rev() {
+        let tail: f64 = (row + 1..N).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - tail) / a[row][row];
+    }
+    Some(x)
+}
+
+/// Gauss–Newton on the points' signed distances from a primitive made from `N` parameters
+/// (`make`), with forward-difference derivatives: fits what an algebraic first guess left a
+/// few millimetres off (a box's footprint from the extreme points of noisy faces).
+fn refine<const N: usize>(
+    start: [f32; N],
+    points: &[Vec3],
+    make: impl Fn(&[f32; N]) -> Option<Primitive>,
+) -> Option<[f32; N]> {
+    let mut x = start;
+    for _ in 0..8 {
+        let here = make(&x)?;
+        let r: Vec<f64> = points
+            .iter()
+            .map(|&p| f64::from(here.signed_distance(p)))
+            .collect();
+        let mut jacobian = vec![[0.0f64; N]; points.len()];
+        for k in 0..N {
+            let h = 1e-4f32.max(1e-3 * x[k].abs());
+            let mut moved = x;
+            moved[k] += h;
+            let there = make(&moved)?;
+            for ((row, &p), r) in jacobian.iter_mut().zip(points).zip(&r) {
+                row[k] = (f64::from(there.signed_distance(p)) - r) / f64::from(h);
+            }
+        }
+        let (mut a, mut b) = ([[0.0f64; N]; N], [0.0f64; N]);
+        for (row, r) in jacobian.iter().zip(&r) {
+            for i in 0..N {
+                for j in 0..N {
+                    a[i][j] += row[i] * row[j];
+                }
+                b[i] -= row[i] * r;
+            }
+        }
+        for (i, row) in a.iter_mut().enumerate() {
+            row[i] += 1e-9;
+        }
+        let step = solve(a, b)?;
+        for (x, s) in x.iter_mut().zip(step) {
+            *x += s as f32;
+        }
+        if step.iter().map(|s| s * s).sum::<f64>() < 1e-12 {
+            break;
+        }
+    }
+    Some(x)
+}
+
+/// A sphere resting on the support (or free, without one).
+fn sphere(points: &[Vec3], support: Option<SupportPlane>) -> Option<Primitive> {
+    let (centre, radius) = fit_sphere(points)?;
+    let primitive = Primitive {
+        shape: PrimitiveShape::Sphere { radius_m: radius },
+        rotation: Quat::IDENTITY,
+        centre,
+        residual_m: 0.0,
+    };
+    rests(&primitive, support).then_some(primitive)
+}
+
+/// A box standing on the support: its footprint the smallest rectangle around the points
+/// seen from above, its top the highest points. Needs its top seen.
+fn standing_box(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
+    let normal = support.normal.normalize_or_zero();
+    let (u, v) = plane_axes(normal);
+    let top = points
+        .iter()
+        .map(|&p| support.height(p))
+        .fold(f32::NEG_INFINITY, f32::max);
+    let on_top = points
+        .iter()
+        .filter(|&&p| support.height(p) > top - 2.0 * bound_m)
+        .count();
+    if top.is_nan() || top <= 2.0 * bound_m || on_top * 5 < points.len() {
+        return None;
+    }
+    let flat: Vec<Vec2> = points
+        .iter()
+        .map(|p| Vec2::new(p.dot(u), p.dot(v)))
+        .collect();
+    let (centre, axis, half) = crate::min_area_rectangle(&flat)?;
+    let base = normal * support.offset;
+    // Footprint centre, its turn in the plane, its half sides and the height: standing on the
+    // support, so the box's bottom stays on it.
+    let make = |p: &[f32; 6]| {
+        let x = u * p[2].cos() + v * p[2].sin();
+        let (half_x, half_y, height) = (p[3], p[4], p[5]);
+        (half_x > 0.0 && half_y > 0.0 && height > 0.0).then(|| Primitive {
+            shape: PrimitiveShape::Box {
+                half_m: Vec3::new(half_x, half_y, 0.5 * height),
+            },
+            rotation: Quat::from_mat3(&Mat3::from_cols(x, normal.cross(x), normal)).normalize(),
+            centre: base + u * p[0] + v * p[1] + normal * (0.5 * height),
+            residual_m: 0.0,
+        })
+    };
+    let start = [
+        centre.x,
+        centre.y,
+        axis.y.atan2(axis.x),
+        half.x,
+        half.y,
+        top,
+    ];
+    let best = refine(start, points, make).unwrap_or(start);
+    make(&best)
+}
+
+/// A cylinder standing on the support: its wall a circle fitted to the points below its top,
+/// its top the highest points. Needs its wall seen.
+fn standing_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
+    let normal = support.normal.normalize_or_zero();
+    let (u, v) = plane_axes(normal);
+    let top = points
+        .iter()
+        .map(|&p| support.height(p))
+        .fold(f32::NEG_INFINITY, f32::max);
+    let wall: Vec<Vec2> = points
+        .iter()
+        .filter(|&&p| support.height(p) < top - 2.0 * bound_m)
+        .map(|p| Vec2::new(p.dot(u), p.dot(v)))
+        .collect();
+    if top.is_nan() || top <= 2.0 * bound_m || wall.len() * 5 < points.len() {
+        return None;
+    }
+    let (centre, radius) = fit_circle(&wall)?;
+    let base = normal * support.offset;
+    Some(Primitive {
+        shape: PrimitiveShape::Cylinder {
+            radius_m: radius,
+            half_height_m: 0.5 * top,
+        },
+        rotation: Quat::from_rotation_arc(Vec3::Z, normal),
+        centre: base + u * centre.x + v * centre.y + normal * (0.5 * top),
+        residual_m: 0.0,
+    })
+}
+
+/// A cylinder lying on the support: its axis the longest direction of the points in the plane,
+/// its section a circle fitted across it, touching the support.
+fn lying_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
+    let normal = support.normal.normalize_or_zero();
+    let (u, v) = plane_axes(normal);
+    let flat: Vec<Vec2> = points
+        .iter()
+        .map(|p| Vec2::new(p.dot(u), p.dot(v)))
+        .collect();
+    // The footprint of a lying cylinder is a rectangle: its long side is the axis.
+    let (_, side, half) = crate::min_area_rectangle(&flat)?;
+    let along2 = if half.x >= half.y { side } else { side.perp() };
+    let axis = (u * along2.x + v * along2.y).normalize();
+    let across = normal.cross(axis);
+    let (lo, hi) = points
+        .iter()
+        .map(|p| p.dot(axis))
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    // The section, across the axis and up from the support, of the wall: an end cap's points
+    // (at either end along the axis) would fill the circle in.
+    let section: Vec<Vec2> = points
+        .iter()
+        .filter(|p| (lo + 2.0 * bound_m..hi - 2.0 * bound_m).contains(&p.dot(axis)))
+        .map(|&p| Vec2::new(p.dot(across), support.height(p)))
+        .collect();
+    let (centre, radius) = fit_circle(&section)?;
+    // It lies on the support: the circle's lowest point on the plane.
+    let middle = 0.5 * (lo + hi);
+    let primitive = Primitive {
+        shape: PrimitiveShape::Cylinder {
+            radius_m: radius,
+            half_height_m: 0.5 * (hi - lo),
+        },
+        rotation: Quat::from_mat3(&Mat3::from_cols(across, normal, axis)).normalize(),
+        centre: axis * middle + across * centre.x + normal * (support.offset + centre.y),
+        residual_m: 0.0,
+    };
+    rests(&primitive, Some(support)).then_some(primitive)
+}
+
+/// Whether a primitive stands on the support (its lowest point within a centimetre of the
+/// plane), or there is no support to stand on.
+fn rests(primitive: &Primitive, support: Option<SupportPlane>) -> bool {
+    let Some(support) = support else {
+        return true;
+    };
+    let normal = support.normal.normalize_or_zero();
+    // The lowest point of the primitive along the normal.
+    let down = primitive.rotation.inverse() * -normal;
+    let reach = match primitive.shape {
+        PrimitiveShape::Sphere { radius_m } => radius_m,
+        PrimitiveShape::Box { half_m } => (down.abs() * half_m).element_sum(),
+        PrimitiveShape::Cylinder {
+            radius_m,
+            half_height_m,
+        } => down.z.abs() * half_height_m + radius_m * Vec2::new(down.x, down.y).length(),
+    };
+    (support.height(primitive.centre) - reach).abs() <= 0.01
+}
+
+/// The primitive that explains `points` (what was seen of an object, in its frame) best, if
+/// one explains them within `bound_m` (95th percentile of the distances): of a box, a standing
+/// or lying cylinder and a sphere, each resting on `support` when there is one.
+pub fn fit_primitive(
+    points: &[Vec3],
+    support: Option<SupportPlane>,
+    bound_m: f32,
+) -> Option<Primitive> {
+    let points: Vec<Vec3> = points.iter().copied().filter(|p| p.is_finite()).collect();
+    if points.len() < 8 || bound_m.is_nan() || bound_m <= 0.0 {
+        return None;
+    }
+    let mut candidates: Vec<Primitive> = Vec::new();
+    candidates.extend(sphere(&points, support));
+    if let Some(support) = support.filter(|s| s.normal.length() > 0.5) {
+        candidates.extend(standing_box(&points, support, bound_m));
+        candidates.extend(standing_cylinder(&points, support, bound_m));
+        candidates.extend(lying_cylinder(&points, support, bound_m));
+    }
+    candidates
+        .into_iter()
+        .filter(|c| c.shape.volume_m3().is_finite() && c.shape.volume_m3() > 0.0)
+        .map(|c| Primitive {
+            residual_m: residual(&c, &points),
+            ..c
+        })
+        .filter(|c| c.residual_m <= bound_m)
+        .min_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A low-discrepancy sequence in [0, 1)² and a small deterministic noise, so that the
+    /// tests need no random generator.
+    fn unit2(i: usize) -> Vec2 {
+        let golden = 0.618_034_f64;
+        let plastic = 0.754_877_7_f64;
+        Vec2::new(
+            ((i as f64 * golden).fract()) as f32,
+            ((i as f64 * plastic).fract()) as f32,
+        )
+    }
+
+    fn noise(i: usize, sigma: f32) -> Vec3 {
+        let h = |k: f32| ((i as f32 * 12.9898 + k * 78.233).sin() * 43_758.547).fract() - 0.5;
+        Vec3::new(h(1.0), h(2.0), h(3.0)) * (2.0 * sigma)
+    }
+
+    /// Points of `primitive`'s surface that a camera at `eye` sees (it is convex: a point is
+    /// seen when its normal faces the eye), with noise.
+    fn seen(primitive: &Primitive, eye: Vec3, n: usize, sigma: f32) -> Vec<Vec3> {
+        let mut points = Vec::new();
+        let mut i = 0;
+        while points.len() < n && i < 100 * n {
+            i += 1;
+            let s = unit2(i);
+            let (q, normal) = match primitive.shape {
+                PrimitiveShape::Sphere { radius_m } => {
+                    let z = 2.0 * s.x - 1.0;
+                    let a = std::f32::consts::TAU * s.y;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let d = Vec3::new(r * a.cos(), r * a.sin(), z);
+                    (d * radius_m, d)
+                }
+                PrimitiveShape::Box { half_m } => {
+                    let face = i % 6;
+                    let axis = face / 2;
+                    let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
+                    let (a, b) = (2.0 * s.x - 1.0, 2.0 * s.y - 1.0);
+                    let q = match axis {
+                        0 => Vec3::new(sign, a, b),
+                        1 => Vec3::new(a, sign, b),
+                        _ => Vec3::new(a, b, sign),
+                    } * half_m;
+                    let mut normal = Vec3::ZERO;
+                    normal[axis] = sign;
+                    (q, normal)
+                }
+                PrimitiveShape::Cylinder {
+                    radius_m,
+                    half_height_m,
+                } => {
+                    let a = std::f32::consts::TAU * s.y;
+                    if i % 3 == 0 {
+                        let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+                        let r = radius_m * s.x.sqrt();
+                        (
+                            Vec3::new(r * a.cos(), r * a.sin(), sign * half_height_m),
+                            Vec3::Z * sign,
+                        )
+                    } else {
+                        let d = Vec3::new(a.cos(), a.sin(), 0.0);
+                        (
+                            d * radius_m + Vec3::Z * (2.0 * s.x - 1.0) * half_height_m,
+                            d,
+                        )
+                    }
+                }
+            };
+            let p = primitive.rotation * q + primitive.centre;
+            let normal = primitive.rotation * normal;
+            if normal.dot(eye - p) > 0.0 {
+                points.push(p + noise(i, sigma));
+            }
+        }
+        points
+    }
+
+    const TABLE: SupportPlane = SupportPlane {
+        normal: Vec3::Z,
+        offset: 0.0,
+    };
+    /// A camera 45° above the table, 0.8 m away, as in the demo.
+    const EYE: Vec3 = Vec3::new(0.0, -0.6, 0.6);
+    const BOUND_M: f32 = 0.004;
+
+    fn check(truth: Primitive, expected: &str) -> Primitive {
+        let points = seen(&truth, EYE, 3000, 0.001);
+        let fit = fit_primitive(&points, Some(TABLE), BOUND_M)
+            .unwrap_or_else(|| panic!("no primitive fits a one-view {expected}"));
+        assert_eq!(fit.shape.name(), expected, "{fit:?}");
+        let (mass, true_mass) = (fit.mass(), truth.mass());
+        let ratio = mass.volume_m3 / true_mass.volume_m3;
+        assert!(
+            (0.9..1.1).contains(&ratio),
+            "{expected}: mass {ratio}× the truth, {fit:?}"
+        );
+        let off = mass.centre_of_mass.distance(true_mass.centre_of_mass);
+        assert!(
+            off < 0.01,
+            "{expected}: centre of mass {off} m off, {fit:?}"
+        );
+        fit
+    }
+
+    #[test]
+    fn a_one_view_box_is_a_box_of_the_right_mass() {
+        let truth = Primitive {
+            shape: PrimitiveShape::Box {
+                half_m: Vec3::new(0.1, 0.06, 0.08),
+            },
+            rotation: Quat::from_rotation_z(0.5),
+            centre: Vec3::new(0.1, 0.2, 0.08),
+            residual_m: 0.0,
+        };
+        check(truth, "box");
+    }
+
+    #[test]
+    fn a_standing_cylinder_is_a_cylinder() {
+        let truth = Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: 0.05,
+                half_height_m: 0.09,
+            },
+            rotation: Quat::IDENTITY,
+            centre: Vec3::new(-0.1, 0.1, 0.09),
+            residual_m: 0.0,
+        };
+        check(truth, "cylinder");
+    }
+
+    #[test]
+    fn a_lying_cylinder_is_a_cylinder_along_its_axis() {
+        let truth = Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: 0.04,
+                half_height_m: 0.12,
+            },
+            // Its axis along the table, 30° off the x axis.
+            rotation: Quat::from_rotation_z(0.52)
+                * Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            centre: Vec3::new(0.0, 0.1, 0.04),
+            residual_m: 0.0,
+        };
+        let fit = check(truth, "cylinder");
+        let axis = fit.rotation * Vec3::Z;
+        assert!(axis.z.abs() < 0.05, "lying: axis {axis}");
+    }
+
+    #[test]
+    fn a_ball_on_the_table_is_a_sphere() {
+        let truth = Primitive {
+            shape: PrimitiveShape::Sphere { radius_m: 0.07 },
+            rotation: Quat::IDENTITY,
+            centre: Vec3::new(0.05, 0.0, 0.07),
+            residual_m: 0.0,
+        };
+        check(truth, "sphere");
+    }
+
+    #[test]
+    fn what_is_no_primitive_gets_none() {
+        // A cone's one-view shell: its side is neither a wall nor a box's face.
+        let mut points = Vec::new();
+        for i in 0..3000 {
+            let s = unit2(i + 1);
+            let a = std::f32::consts::TAU * s.y;
+            let h = 0.2 * s.x;
+            let r = 0.08 * (1.0 - h / 0.2);
+            let p = Vec3::new(r * a.cos(), r * a.sin(), h);
+            let normal = Vec3::new(a.cos() * 0.2, a.sin() * 0.2, 0.08).normalize();
+            if normal.dot(EYE - p) > 0.0 {
+                points.push(p + noise(i, 0.001));
+            }
+        }
+        assert_eq!(fit_primitive(&points, Some(TABLE), BOUND_M), None);
+        assert_eq!(fit_primitive(&[], Some(TABLE), BOUND_M), None);
+    }
+
+    #[test]
+    fn primitive_mass_properties_match_their_meshes() {
+        // A box's inertia about its axes, turned: the same as the closed form turned.
+        let b = Primitive {
+            shape: PrimitiveShape::Box {
+                half_m: Vec3::new(0.1, 0.2, 0.3),
+            },
+            rotation: Quat::from_rotation_x(0.3),
+            centre: Vec3::new(1.0, 2.0, 3.0),
+            residual_m: 0.0,
+        };
+        let m = b.mass();
+        assert!((m.volume_m3 - 0.048).abs() < 1e-6);
+        assert_eq!(m.implausible(), None);
+        let c = Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: 0.1,
+                half_height_m: 0.2,
+            },
+            ..b
+        };
+        assert_eq!(c.mass().implausible(), None);
+        assert!(b.signed_distance(b.centre) < 0.0);
+        assert!(
+            (b.signed_distance(b.centre + b.rotation * Vec3::new(0.0, 0.0, 0.4)) - 0.1).abs()
+                < 1e-5
+        );
+    }
+}
