@@ -26,13 +26,17 @@ use tacmesh_physics::scene::{
     SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
 };
 use tacmesh_physics::{
-    convex_parts, lift_onto_supports, rests_on, starting_overlaps, ConvexConfig, MassProperties,
-    WorldSupport, LIFT_MAX_M, OVERLAP_TOLERANCE_M,
+    convex_parts, fit_primitive, lift_onto_supports, rests_on, starting_overlaps, surface_points,
+    ConvexConfig, MassProperties, Primitive, WorldSupport, LIFT_MAX_M, OVERLAP_TOLERANCE_M,
 };
 use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
 
 use crate::daemon::planes::FIRST_PLANE_ID;
+
+/// What a primitive may be off a shape beyond the shape's own residual bound, metres: the
+/// sensor's noise at a metre or two, which the fused surface keeps some of.
+const PRIMITIVE_NOISE_M: f32 = 0.003;
 
 /// How high above its support an object's parts count as its foot, metres.
 const FOOT_M: f32 = 0.03;
@@ -47,6 +51,8 @@ struct Collision {
     body_version: Option<u64>,
     /// The parts and their mass, or why there are none.
     parts: Result<(Vec<TriMesh>, MassProperties, ProxyKind), String>,
+    /// The primitive the shape is, if one explains it (then the body is that primitive).
+    primitive: Option<Primitive>,
 }
 
 /// Collision parts of a subscriber's objects, kept from update to update.
@@ -74,6 +80,10 @@ pub struct PhysicsUpdate {
     /// Bodies lifted onto the support they reached a little into (a proxy grown by the
     /// sensor's noise): body, support, metres.
     pub lifted: Vec<(String, String, f32)>,
+    /// Objects whose collision was made anew: id, and the primitive their shape is, if any:
+    /// which (`box`, `cylinder`, `sphere`) and the 95th percentile of the shape's distances
+    /// from it, metres.
+    pub primitives: Vec<(u64, Option<(&'static str, f32)>)>,
 }
 
 /// A support's plane and the outline of what was seen of it, in the world.
@@ -124,6 +134,7 @@ impl PhysicsScene {
         let mut from_bodies = 0;
         let mut left_out = Vec::new();
         let mut held_still = Vec::new();
+        let mut primitives = Vec::new();
         let mut bodies = Vec::new();
         let mut objects: Vec<&SceneObject> =
             scene.objects().filter(|o| !o.shape.is_support()).collect();
@@ -136,6 +147,13 @@ impl PhysicsScene {
                 c.shape_version != object.shape.version() || c.body_version != body_version
             });
             if stale {
+                let support = support_under(&supports, object, world_from_object);
+                let primitive = fit_primitive(
+                    &surface_points(&object.shape.mesh),
+                    support,
+                    object.shape.report.max_residual_m + PRIMITIVE_NOISE_M,
+                );
+                primitives.push((id, primitive.map(|p| (p.shape.name(), p.residual_m))));
                 let parts = match &object.body {
                     Some(body) => Ok(published_parts(body)),
                     None => {
@@ -150,14 +168,23 @@ impl PhysicsScene {
                         shape_version: object.shape.version(),
                         body_version,
                         parts,
+                        primitive,
                     },
                 );
             }
             if body_version.is_some() {
                 from_bodies += 1;
             }
-            match &self.collisions[&id].parts {
-                Ok((parts, mass, _)) => {
+            let collision = &self.collisions[&id];
+            // A primitive is the object whole: its mass, and the engine's exact collisions.
+            let as_primitive = collision.primitive.map(|p| (vec![p.mesh()], p.mass()));
+            let parts = match (&collision.parts, &as_primitive) {
+                (_, Some((mesh, mass))) => Ok((mesh, mass)),
+                (Ok((parts, mass, _)), None) => Ok((parts, mass)),
+                (Err(why), None) => Err(why),
+            };
+            match parts {
+                Ok((parts, mass)) => {
                     let support = support_under(&supports, object, world_from_object);
                     // What stands on a support is evidence of it: the table goes on under the
                     // object, where the camera could not see it. Its foot joins the support's
@@ -181,6 +208,9 @@ impl PhysicsScene {
                             held_still.push((id, why.clone()));
                             Motion::Static
                         }
+                        // A primitive was fitted resting on this support (a ball touches it
+                        // in one point, a lying drum along a line: too few for the footprint).
+                        (Some(_), Ok(_)) if collision.primitive.is_some() => Motion::Dynamic,
                         (Some(support), Ok(mass))
                             if rests_on(parts, mass.centre_of_mass, support) =>
                         {
@@ -207,6 +237,7 @@ impl PhysicsScene {
                         },
                         visual: object.shape.mesh.clone(),
                         convex_parts: parts.clone(),
+                        primitive: collision.primitive,
                         mass: plausible.unwrap_or(*mass),
                         motion,
                     })
@@ -266,6 +297,7 @@ impl PhysicsScene {
             held_still,
             overlaps,
             lifted,
+            primitives,
         }
     }
 }

@@ -15,8 +15,8 @@ use std::process::ExitCode;
 
 use glam::{Quat, Vec3};
 use tacmesh_physics::{
-    convex_parts, write_mjcf, write_sdf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Scene,
-    SceneBody, SceneSupport, SdfConfig, TriMesh, WorldFromBody,
+    convex_parts, write_mjcf, write_sdf, ConvexConfig, MjcfConfig, Motion, PhysicsError, Primitive,
+    PrimitiveShape, Scene, SceneBody, SceneSupport, SdfConfig, TriMesh, WorldFromBody,
 };
 use tacmesh_sim::{cube, uv_sphere};
 
@@ -33,9 +33,33 @@ fn body(
         world_from_body,
         visual: mesh,
         convex_parts: parts.hulls,
+        primitive: None,
         mass: parts.mesh_mass,
         motion,
     })
+}
+
+/// A body that is a primitive: a standing cylinder 16 cm tall, 5 cm in radius, written as the
+/// engine's own cylinder.
+fn drum(world_from_body: WorldFromBody) -> SceneBody {
+    let primitive = Primitive {
+        shape: PrimitiveShape::Cylinder {
+            radius_m: 0.05,
+            half_height_m: 0.08,
+        },
+        rotation: Quat::IDENTITY,
+        centre: Vec3::ZERO,
+        residual_m: 0.0,
+    };
+    SceneBody {
+        name: "drum".into(),
+        world_from_body,
+        visual: primitive.mesh(),
+        convex_parts: vec![primitive.mesh()],
+        primitive: Some(primitive),
+        mass: primitive.mass(),
+        motion: Motion::Dynamic,
+    }
 }
 
 fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
@@ -84,6 +108,7 @@ fn demo_scene(up: Vec3) -> Result<Scene, PhysicsError> {
                 at(Vec3::new(0.6, 0.0, 0.45), 0.2),
                 Motion::Dynamic,
             )?,
+            drum(at(Vec3::new(-0.2, -0.3, 0.08), 0.0)),
             body(
                 "under_desk",
                 cube(0.1),

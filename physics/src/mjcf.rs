@@ -3,7 +3,8 @@
 //!
 //! What each body becomes (MJCF reference: <https://mujoco.readthedocs.io/en/stable/XMLreference.html>):
 //! - a `<body>` at its pose in the world (`pos`, `quat` as w x y z);
-//! - one collision `<geom type="mesh">` per convex part: MuJoCo collides the convex hull of
+//! - a body that is a primitive ([`SceneBody::primitive`]) collides as MuJoCo's own `box`,
+//!   `cylinder` or `sphere` geom; any other has one collision `<geom type="mesh">` per convex part: MuJoCo collides the convex hull of
 //!   any mesh, so a concave visual mesh would collide as its hull; the parts are the
 //!   decomposition (`crate::convex`);
 //! - bodies collide with each other and with the supports, except the pairs the scene lists in
@@ -35,6 +36,7 @@ use glam::{Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::error::PhysicsError;
+use crate::primitive::PrimitiveShape;
 use crate::scene::{check_scene, number, numbers, sanitise, write_scene_files, UniqueNames};
 // The scene's types, here too: the MJCF writer's callers name them through this module.
 pub use crate::scene::{
@@ -163,7 +165,31 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
             );
             meshes.push((file, body.visual.clone()));
         }
-        for (k, part) in body.convex_parts.iter().enumerate() {
+        if let Some(primitive) = &body.primitive {
+            // The engine's own geom: exact contact, true normals.
+            let geom_name = names.claim(&format!("{name}_{}", primitive.shape.name()));
+            let (kind, size) = match primitive.shape {
+                PrimitiveShape::Box { half_m } => ("box", half_m.to_array().to_vec()),
+                PrimitiveShape::Cylinder {
+                    radius_m,
+                    half_height_m,
+                } => ("cylinder", vec![radius_m, half_height_m]),
+                PrimitiveShape::Sphere { radius_m } => ("sphere", vec![radius_m]),
+            };
+            let _ = writeln!(
+                world,
+                r#"      <geom name="{geom_name}" class="collision" type="{kind}" size="{}" pos="{}" quat="{}"/>"#,
+                numbers(&size),
+                numbers(&primitive.centre.to_array()),
+                mjcf_quat(primitive.rotation),
+            );
+        }
+        let parts = if body.primitive.is_some() {
+            &[][..]
+        } else {
+            &body.convex_parts[..]
+        };
+        for (k, part) in parts.iter().enumerate() {
             let mesh_name = names.claim(&format!("{name}_part{k}"));
             let file = format!("{MESH_FOLDER}/{mesh_name}.stl");
             let _ = writeln!(
@@ -275,6 +301,7 @@ mod tests {
             },
             visual: mesh,
             convex_parts: parts.hulls,
+            primitive: None,
             mass: parts.mesh_mass,
             motion,
         }
@@ -370,6 +397,38 @@ mod tests {
             "{xml}"
         );
         assert!(!xml.contains("<contact>"), "{xml}");
+    }
+
+    #[test]
+    fn a_primitive_body_collides_as_the_engines_own_geom() {
+        let mut scene = two_body_scene();
+        let primitive = crate::primitive::Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: 0.05,
+                half_height_m: 0.08,
+            },
+            rotation: Quat::IDENTITY,
+            centre: Vec3::new(0.0, 0.0, 0.01),
+            residual_m: 0.002,
+        };
+        scene.bodies[0].primitive = Some(primitive);
+        scene.bodies[0].mass = primitive.mass();
+        let document = mjcf_document(&scene, &MjcfConfig::default()).unwrap();
+        assert!(
+            document.xml.contains(
+                r#"class="collision" type="cylinder" size="0.05 0.08" pos="0 0 0.01" quat="1 0 0 0"/>"#
+            ),
+            "{}",
+            document.xml
+        );
+        // Its parts are not written: the other body's are.
+        assert_eq!(
+            document
+                .xml
+                .matches(r#"class="collision" type="mesh""#)
+                .count(),
+            1
+        );
     }
 
     #[test]

@@ -202,6 +202,7 @@ mod tests {
             },
             visual: mesh,
             convex_parts: parts.hulls,
+            primitive: None,
             mass: parts.mesh_mass,
             motion: Motion::Dynamic,
         }

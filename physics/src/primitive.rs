@@ -110,6 +110,34 @@ impl Primitive {
             .signed_distance(self.rotation.inverse() * (p - self.centre))
     }
 
+    /// A closed, outward tessellation in the object's frame (a box's 8 corners, a cylinder of
+    /// 24 sides, a sphere of 16 × 8), for what needs a mesh: the convex parts an engine without
+    /// the primitive collides with, the overlap and footprint checks.
+    pub fn mesh(&self) -> TriMesh {
+        let local = match self.shape {
+            PrimitiveShape::Box { half_m } => {
+                let mut mesh = box_mesh();
+                for v in &mut mesh.vertices {
+                    *v *= half_m;
+                }
+                mesh
+            }
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            } => cylinder_mesh(24, radius_m, half_height_m),
+            PrimitiveShape::Sphere { radius_m } => sphere_mesh(16, 8, radius_m),
+        };
+        TriMesh::new(
+            local
+                .vertices
+                .iter()
+                .map(|&v| self.rotation * v + self.centre)
+                .collect(),
+            local.triangles,
+        )
+    }
+
     /// Mass properties at unit density, in the object's frame.
     pub fn mass(&self) -> MassProperties {
         let r = Mat3::from_quat(self.rotation);
@@ -124,6 +152,80 @@ impl Primitive {
             ],
         }
     }
+}
+
+/// A cube from −1 to 1, outward.
+fn box_mesh() -> TriMesh {
+    let vertices = (0..8u32)
+        .map(|i| {
+            let pick = |bit: u32| if i & (1 << bit) != 0 { 1.0 } else { -1.0 };
+            Vec3::new(pick(0), pick(1), pick(2))
+        })
+        .collect();
+    // Counter-clockwise seen from outside: -X, +X, -Y, +Y, -Z, +Z.
+    const FACES: [[u32; 4]; 6] = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
+    let triangles = FACES
+        .iter()
+        .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
+        .collect();
+    TriMesh::new(vertices, triangles)
+}
+
+/// A cylinder about z, `sides` around, outward.
+fn cylinder_mesh(sides: u32, radius: f32, half_height: f32) -> TriMesh {
+    let mut vertices = Vec::with_capacity(2 * sides as usize + 2);
+    for k in 0..sides {
+        let a = std::f32::consts::TAU * k as f32 / sides as f32;
+        let (x, y) = (radius * a.cos(), radius * a.sin());
+        vertices.push(Vec3::new(x, y, -half_height));
+        vertices.push(Vec3::new(x, y, half_height));
+    }
+    let (bottom, top) = (2 * sides, 2 * sides + 1);
+    vertices.push(Vec3::new(0.0, 0.0, -half_height));
+    vertices.push(Vec3::new(0.0, 0.0, half_height));
+    let mut triangles = Vec::with_capacity(4 * sides as usize);
+    for k in 0..sides {
+        let (b0, t0) = (2 * k, 2 * k + 1);
+        let (b1, t1) = (2 * ((k + 1) % sides), 2 * ((k + 1) % sides) + 1);
+        triangles.extend([[b0, b1, t1], [b0, t1, t0], [bottom, b1, b0], [top, t0, t1]]);
+    }
+    TriMesh::new(vertices, triangles)
+}
+
+/// A UV sphere, `around` × `rings`, outward.
+fn sphere_mesh(around: u32, rings: u32, radius: f32) -> TriMesh {
+    let mut vertices = vec![Vec3::new(0.0, 0.0, -radius)];
+    for ring in 1..rings {
+        let polar = std::f32::consts::PI * ring as f32 / rings as f32;
+        let (z, r) = (-radius * polar.cos(), radius * polar.sin());
+        for k in 0..around {
+            let a = std::f32::consts::TAU * k as f32 / around as f32;
+            vertices.push(Vec3::new(r * a.cos(), r * a.sin(), z));
+        }
+    }
+    vertices.push(Vec3::new(0.0, 0.0, radius));
+    let north = vertices.len() as u32 - 1;
+    let at = |ring: u32, k: u32| 1 + (ring - 1) * around + k % around;
+    let mut triangles = Vec::new();
+    for k in 0..around {
+        triangles.push([0, at(1, k + 1), at(1, k)]);
+        triangles.push([north, at(rings - 1, k), at(rings - 1, k + 1)]);
+    }
+    for ring in 1..rings - 1 {
+        for k in 0..around {
+            let (a, b) = (at(ring, k), at(ring, k + 1));
+            let (c, d) = (at(ring + 1, k), at(ring + 1, k + 1));
+            triangles.extend([[a, b, d], [a, d, c]]);
+        }
+    }
+    TriMesh::new(vertices, triangles)
 }
 
 /// Points to judge a fit by: a mesh's vertices, edge midpoints and triangle centroids (a
@@ -409,15 +511,22 @@ fn standing_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Op
     }
     let (centre, radius) = fit_circle(&wall)?;
     let base = normal * support.offset;
-    Some(Primitive {
-        shape: PrimitiveShape::Cylinder {
-            radius_m: radius,
-            half_height_m: 0.5 * top,
-        },
-        rotation: Quat::from_rotation_arc(Vec3::Z, normal),
-        centre: base + u * centre.x + v * centre.y + normal * (0.5 * top),
-        residual_m: 0.0,
-    })
+    // Then all the points at once (wall and top), standing on the support: the circle of the
+    // wall alone is pulled by a rounded rim and by where the wall and the top were told apart.
+    let make = |p: &[f32; 4]| {
+        (p[2] > 0.0 && p[3] > 0.0).then(|| Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: p[2],
+                half_height_m: 0.5 * p[3],
+            },
+            rotation: Quat::from_rotation_arc(Vec3::Z, normal),
+            centre: base + u * p[0] + v * p[1] + normal * (0.5 * p[3]),
+            residual_m: 0.0,
+        })
+    };
+    let start = [centre.x, centre.y, radius, top];
+    let best = refine(start, points, make).unwrap_or(start);
+    make(&best)
 }
 
 /// A cylinder lying on the support: its axis the longest direction of the points in the plane,
@@ -692,6 +801,32 @@ mod tests {
         }
         assert_eq!(fit_primitive(&points, Some(TABLE), BOUND_M), None);
         assert_eq!(fit_primitive(&[], Some(TABLE), BOUND_M), None);
+    }
+
+    #[test]
+    fn primitive_meshes_are_closed_outward_and_weigh_about_as_much() {
+        for shape in [
+            PrimitiveShape::Box {
+                half_m: Vec3::new(0.1, 0.2, 0.3),
+            },
+            PrimitiveShape::Cylinder {
+                radius_m: 0.1,
+                half_height_m: 0.2,
+            },
+            PrimitiveShape::Sphere { radius_m: 0.1 },
+        ] {
+            let primitive = Primitive {
+                shape,
+                rotation: Quat::from_rotation_y(0.7),
+                centre: Vec3::new(0.3, -0.2, 0.1),
+                residual_m: 0.0,
+            };
+            let mesh = MassProperties::of_closed_mesh(&primitive.mesh()).expect("closed");
+            let exact = primitive.mass();
+            let ratio = mesh.volume_m3 / exact.volume_m3;
+            assert!((0.9..=1.0001).contains(&ratio), "{}: {ratio}", shape.name());
+            assert!(mesh.centre_of_mass.distance(exact.centre_of_mass) < 1e-4);
+        }
     }
 
     #[test]

@@ -48,7 +48,11 @@ pub struct SceneBody {
     /// What is drawn; never collides. May be empty (no visual geom).
     pub visual: TriMesh,
     /// Closed convex parts, what collides (`crate::convex_parts`). A dynamic body needs one.
+    /// With a [`SceneBody::primitive`], its tessellation.
     pub convex_parts: Vec<TriMesh>,
+    /// The primitive the body is (a box, a cylinder, a sphere), in its frame: the writers
+    /// collide it as the engine's own geom instead of the convex parts.
+    pub primitive: Option<crate::primitive::Primitive>,
     /// Unit-density mass properties in the body's frame (of the mesh, or of its parts).
     pub mass: MassProperties,
     pub motion: Motion,

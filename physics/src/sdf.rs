@@ -7,7 +7,8 @@
 //! - a body is a `<model>` at its pose (`<pose>` x y z roll pitch yaw: rotation
 //!   Rz(yaw)·Ry(pitch)·Rx(roll)), `<static>` 1 when it may not move (PyBullet reads `1`, not
 //!   `true`), with one `<link>`;
-//! - one `<collision>` per convex part (Gazebo's and Bullet's mesh collisions are convex
+//! - a body that is a primitive collides as SDFormat's own `<box>`, `<cylinder>` or
+//!   `<sphere>`; any other has one `<collision>` per convex part (Gazebo's and Bullet's mesh collisions are convex
 //!   hulls, as MuJoCo's are), and the visual mesh as a `<visual>` (never collides);
 //! - a dynamic body's `<inertial>`: the centre of mass as its pose, the mass at
 //!   [`SdfConfig::density_kg_m3`], the inertia tensor's six elements about the centre of mass
@@ -34,6 +35,7 @@ use glam::{EulerRot, Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::error::PhysicsError;
+use crate::primitive::PrimitiveShape;
 use crate::scene::{
     check_scene, number, numbers, sanitise, write_scene_files, Member, Motion, Scene, UniqueNames,
     WrittenScene, MESH_FOLDER,
@@ -157,7 +159,40 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
                 "<surface><contact><collide_bitmask>{bit}</collide_bitmask></contact></surface>"
             )
         };
-        for (k, part) in body.convex_parts.iter().enumerate() {
+        if let Some(primitive) = &body.primitive {
+            // The engine's own shape: exact contact, true normals.
+            let geom_name = names.claim(&format!("{name}_{}", primitive.shape.name()));
+            let geometry = match primitive.shape {
+                PrimitiveShape::Box { half_m } => {
+                    format!(
+                        "<box><size>{}</size></box>",
+                        numbers(&(2.0 * half_m).to_array())
+                    )
+                }
+                PrimitiveShape::Cylinder {
+                    radius_m,
+                    half_height_m,
+                } => format!(
+                    "<cylinder><radius>{}</radius><length>{}</length></cylinder>",
+                    number(radius_m),
+                    number(2.0 * half_height_m)
+                ),
+                PrimitiveShape::Sphere { radius_m } => {
+                    format!("<sphere><radius>{}</radius></sphere>", number(radius_m))
+                }
+            };
+            let _ = writeln!(
+                world,
+                r#"        <collision name="{geom_name}"><pose>{}</pose><geometry>{geometry}</geometry>{surface}</collision>"#,
+                sdf_pose(primitive.rotation, primitive.centre),
+            );
+        }
+        let parts = if body.primitive.is_some() {
+            &[][..]
+        } else {
+            &body.convex_parts[..]
+        };
+        for (k, part) in parts.iter().enumerate() {
             let mesh_name = names.claim(&format!("{name}_part{k}"));
             let uri = format!("{MESH_FOLDER}/{mesh_name}.stl");
             let _ = writeln!(
@@ -266,6 +301,7 @@ mod tests {
                     },
                     visual: mesh.clone(),
                     convex_parts: parts.hulls.clone(),
+                    primitive: None,
                     mass: parts.mesh_mass,
                     motion: if k == 0 {
                         Motion::Static
@@ -388,6 +424,27 @@ mod tests {
         assert_eq!(
             xml.matches("<collide_bitmask>1</collide_bitmask>").count(),
             2
+        );
+    }
+
+    #[test]
+    fn a_primitive_body_collides_as_sdformats_own_shape() {
+        let mut scene = scene(2);
+        let primitive = crate::primitive::Primitive {
+            shape: PrimitiveShape::Cylinder {
+                radius_m: 0.05,
+                half_height_m: 0.08,
+            },
+            rotation: Quat::IDENTITY,
+            centre: Vec3::ZERO,
+            residual_m: 0.002,
+        };
+        scene.bodies[1].primitive = Some(primitive);
+        scene.bodies[1].mass = primitive.mass();
+        let xml = sdf_document(&scene, &SdfConfig::default()).unwrap().xml;
+        assert!(
+            xml.contains("<geometry><cylinder><radius>0.05</radius><length>0.16</length></cylinder></geometry>"),
+            "{xml}"
         );
     }
 

@@ -47,7 +47,10 @@ WARM_UP_S = 60.0
 def daemon_binary() -> Path:
     named = os.environ.get("TACMESH_BIN")
     candidates = [Path(named)] if named else []
-    candidates += [REPO / "target" / "debug" / "tacmesh", REPO / "target" / "release" / "tacmesh"]
+    candidates += [
+        REPO / "target" / "debug" / "tacmesh",
+        REPO / "target" / "release" / "tacmesh",
+    ]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
@@ -125,7 +128,11 @@ def ready(daemon: Daemon) -> None:
 
 def test_the_demo_scene_fills_with_objects(daemon: Daemon) -> None:
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
-        seen = follow(sub, lambda m: is_ready(sub.scene) and sub.scene.stats is not None, WARM_UP_S)
+        seen = follow(
+            sub,
+            lambda m: is_ready(sub.scene) and sub.scene.stats is not None,
+            WARM_UP_S,
+        )
     first = seen[0]
     assert isinstance(first, Hello) and first.protocol_version == PROTOCOL_VERSION == 3, first
     assert isinstance(seen[1], Session)
@@ -222,7 +229,12 @@ def test_times_and_versions_never_go_backwards_per_object(daemon: Daemon) -> Non
                     now["shape_time_ns"] = message.shape_time_ns
                 before = last.setdefault(pose.object_id, {})
                 for key, value in now.items():
-                    assert value >= before.get(key, 0), (pose.object_id, key, before, now)
+                    assert value >= before.get(key, 0), (
+                        pose.object_id,
+                        key,
+                        before,
+                        now,
+                    )
                     before[key] = value
                 assert pose.last_seen_ns >= pose.pose_time_ns
                 count += 1
@@ -364,7 +376,12 @@ def test_stats_have_the_version_2_counters(daemon: Daemon) -> None:
     assert stats.latency_window == 2048
     assert stats.frame_to_publish_p99_ms >= stats.frame_to_publish_p50_ms > 0
     assert {s.stage for s in stats.stages} >= {"segment", "integrate"}
-    for counter in ("malformed_frames", "source_errors", "source_restarts", "clients_refused"):
+    for counter in (
+        "malformed_frames",
+        "source_errors",
+        "source_restarts",
+        "clients_refused",
+    ):
         assert getattr(stats, counter) == 0, counter
     # The two clocks of one instant: the host's.
     assert abs(stats.monotonic_ns - time.monotonic_ns()) < 5 * 10**9
@@ -418,7 +435,9 @@ def test_a_version_1_subscribe_gets_a_goodbye_about_version_3(daemon: Daemon) ->
     assert closed, "the connection stayed open after the Goodbye"
 
 
-def test_a_restarted_daemon_is_reconnected_to_with_a_fresh_snapshot(tmp_path: Path) -> None:
+def test_a_restarted_daemon_is_reconnected_to_with_a_fresh_snapshot(
+    tmp_path: Path,
+) -> None:
     socket_path = tmp_path / "tacmesh.sock"
     first = Daemon(socket_path)
     second: Daemon | None = None

@@ -23,8 +23,23 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from tacmesh import Message, Pose, Scene, Session, Shape, SnapshotDone, Stats, Subscriber
-from tacmesh.wire import FIRST_SUPPORT_ID, PROTOCOL_VERSION, SHAPE_CLOSED, SHAPE_SUPPORT, Hello
+from tacmesh import (
+    Message,
+    Pose,
+    Scene,
+    Session,
+    Shape,
+    SnapshotDone,
+    Stats,
+    Subscriber,
+)
+from tacmesh.wire import (
+    FIRST_SUPPORT_ID,
+    PROTOCOL_VERSION,
+    SHAPE_CLOSED,
+    SHAPE_SUPPORT,
+    Hello,
+)
 
 from test_daemon import Daemon, daemon  # noqa: F401  (the fixture)
 from test_subscriber import FakeDaemon, Peer, wait_for_close
@@ -76,7 +91,9 @@ def example(name: str) -> ModuleType:
 # ---- a made-up scene -------------------------------------------------------------------------
 
 
-def box(size: tuple[float, float, float]) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
+def box(
+    size: tuple[float, float, float],
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32]]:
     """A closed box centred on its frame's origin, counter-clockwise seen from outside."""
     half = np.array(size) / 2
     corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
@@ -192,11 +209,18 @@ def test_mujoco_made_up_a_pose_moves_a_body_without_a_rebuild() -> None:
 
 
 @needs_rerun
-def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(tmp_path: Path) -> None:
+def test_rerun_made_up_meshes_in_their_frames_and_poses_as_transforms(
+    tmp_path: Path,
+) -> None:
     import rerun as rr
 
     def script(peer: Peer) -> None:
-        peer.send(Hello(PROTOCOL_VERSION, "fake"), Session(1, 2), *made_up_shapes(), SnapshotDone())
+        peer.send(
+            Hello(PROTOCOL_VERSION, "fake"),
+            Session(1, 2),
+            *made_up_shapes(),
+            SnapshotDone(),
+        )
         peer.receive()
         peer.send(pose(1, 1, 200, (-0.25, 0.0, 0.15), 0.5), Stats(monotonic_ns=300))
         peer.send(pose(1, 1, 300, (-0.2, 0.0, 0.15), 0.6), Stats(monotonic_ns=400))

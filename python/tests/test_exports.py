@@ -55,7 +55,12 @@ def test_every_class_the_readme_names_for_errors_is_importable_from_tacmesh() ->
 
 def test_the_readme_names_every_error_class_and_all_are_exported() -> None:
     errors = package_errors()
-    assert {"WireError", "InvalidNumber", "StreamEndedInFrame", "UntrustedServer"} <= errors
+    assert {
+        "WireError",
+        "InvalidNumber",
+        "StreamEndedInFrame",
+        "UntrustedServer",
+    } <= errors
     named = set(named_classes(README.read_text(encoding="utf-8")))
     assert errors <= named, f"python/README.md does not name {sorted(errors - named)}"
     assert errors <= set(tacmesh.__all__), f"not exported: {sorted(errors - set(tacmesh.__all__))}"

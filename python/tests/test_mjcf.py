@@ -104,11 +104,7 @@ def resting_scene(socket_path: Path, out: Path, updates: int) -> tuple[Any, str]
     mujoco.mj_forward(model, data)
     # Supports are finite slabs (boxes), never infinite planes.
     assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)) == 0, done.stdout
-    slabs = [
-        model.geom(g).name
-        for g in range(model.ngeom)
-        if model.geom(g).name.endswith("_slab")
-    ]
+    slabs = [model.geom(g).name for g in range(model.ngeom) if model.geom(g).name.endswith("_slab")]
     assert slabs and all(name.startswith("plane-") for name in slabs), slabs
     start = np.array(data.xpos)
     for _ in range(10 * STEPS):
@@ -118,7 +114,7 @@ def resting_scene(socket_path: Path, out: Path, updates: int) -> tuple[Any, str]
     names = [model.body(b).name for b in range(1, model.nbody)]
     assert np.all(moved < 0.01), dict(zip(names, np.round(moved, 4)))
     assert np.max(np.abs(data.qvel)) < 0.1
-    return model, done.stdout
+    return model, done.stdout + done.stderr
 
 
 def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(
@@ -143,9 +139,7 @@ def test_the_scene_of_a_real_tabletop_recording_rests_on_its_table(
     assert model.nbody - 1 >= 4, printed
     # Bodies follow their shapes off the frame path: some may not have come by then (those
     # objects are their straight-down extrusions in the scene meanwhile).
-    assert (
-        sum(line.startswith("body object") for line in printed.splitlines()) >= 2
-    ), printed
+    assert sum(line.startswith("body object") for line in printed.splitlines()) >= 2, printed
     # Most of them are free bodies; one that does not stand on the table by itself (a fragment
     # held up by another object) is held still (a body without a joint).
     free = int(np.sum(model.body_dofnum[1:] > 0))
@@ -169,10 +163,26 @@ def test_the_subscribers_scene_of_the_demo_rests_on_its_table(
             object_id = int(line.split()[2])
             volumes_l[object_id] = float(line.rsplit("volume ", 1)[1].split(" l")[0])
     assert len(volumes_l) >= 3, printed
+    # An object that is a primitive ("object N is a box in the physics scene", the last such
+    # line) weighs the primitive: the demo's 20 cm cube 8 l, 20 cm ball 4.19 l, 18 cm drum
+    # 4.58 l of the truth, within the 0.8–1.25× issue 40 asks for.
+    primitives: dict[int, str] = {}
+    for line in printed.splitlines():
+        if " in the physics scene (" in line and " is a " in line:
+            words = line.split("object ", 1)[1].split()
+            primitives[int(words[0])] = words[3]
+        elif " is no longer a " in line:
+            primitives.pop(int(line.split("object ", 1)[1].split()[0]), None)
+    truth_l = {"box": 8.0, "sphere": 4.19, "cylinder": 4.58}
     for object_id, volume_l in volumes_l.items():
         body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"object-{object_id}")
         assert body >= 0, f"object {object_id} is not in the scene"
-        # The printed volume is rounded to 0.01 l.
-        assert model.body_mass[body] == pytest.approx(
-            0.5 * volume_l, abs=0.5 * 0.006
-        ), object_id
+        kind = primitives.get(object_id)
+        if kind is None:
+            # The printed volume is rounded to 0.01 l.
+            expected = 0.5 * volume_l
+            assert model.body_mass[body] == pytest.approx(expected, abs=0.5 * 0.006), object_id
+        else:
+            ratio = model.body_mass[body] / (0.5 * truth_l[kind])
+            assert 0.8 <= ratio <= 1.25, (object_id, kind, ratio)
+    print(f"\nprimitives: {primitives}")

@@ -31,9 +31,7 @@ import pytest
 from example_scene import write_example_scene
 from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
 
-pybullet = pytest.importorskip(
-    "pybullet", reason="the pybullet package is not installed"
-)
+pybullet = pytest.importorskip("pybullet", reason="the pybullet package is not installed")
 
 STEP_S = 1.0 / 240.0  # PyBullet's default step
 CUBE_HALF_M = 0.05
@@ -58,13 +56,8 @@ def load_world(path: Path, client: int) -> dict[str, int]:
     ids = pybullet.loadSDF(str(path), physicsClientId=client)
     gravity_text = ElementTree.parse(path).getroot().findtext("world/gravity")
     assert gravity_text is not None, "the world has no gravity"
-    pybullet.setGravity(
-        *[float(g) for g in gravity_text.split()], physicsClientId=client
-    )
-    names = {
-        pybullet.getBodyInfo(body, physicsClientId=client)[1].decode(): body
-        for body in ids
-    }
+    pybullet.setGravity(*[float(g) for g in gravity_text.split()], physicsClientId=client)
+    names = {pybullet.getBodyInfo(body, physicsClientId=client)[1].decode(): body for body in ids}
     assert len(names) == len(ids), "two models share a name"
     return names
 
@@ -104,6 +97,7 @@ def test_cube_rests_and_sphere_lands(
     assert sorted(bodies) == [
         "cube",
         "desk",
+        "drum",
         "on_desk",
         "sphere",
         "table",
@@ -130,11 +124,12 @@ def test_cube_rests_and_sphere_lands(
     assert np.array_equal(position(bodies["wall"], client), wall_start)
     # The desk top is a finite slab 0.4 m up, with a cube on it and one on the floor under it.
     on_desk = position(bodies["on_desk"], client)
-    assert (
-        0.4 + CUBE_HALF_M - 0.002 < np.dot(on_desk, up) < 0.4 + CUBE_HALF_M + MARGIN_M
-    )
+    assert 0.4 + CUBE_HALF_M - 0.002 < np.dot(on_desk, up) < 0.4 + CUBE_HALF_M + MARGIN_M
     under_desk = position(bodies["under_desk"], client)
     assert CUBE_HALF_M - 0.002 < np.dot(under_desk, up) < CUBE_HALF_M + MARGIN_M
+    # The drum is a primitive cylinder (SDFormat's own): 16 cm tall, standing.
+    drum = position(bodies["drum"], client)
+    assert 0.08 - 0.002 < np.dot(drum, up) < 0.08 + MARGIN_M
 
 
 def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
@@ -160,9 +155,7 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
     )
     assert done.returncode == 0, done.stderr
     bodies = load_world(tmp_path / "scene.sdf", client)
-    objects = {
-        name: body for name, body in bodies.items() if name.startswith("object-")
-    }
+    objects = {name: body for name, body in bodies.items() if name.startswith("object-")}
     # The demo's objects and its table (a static plane).
     assert len(objects) >= 3, done.stdout
     assert [name for name in bodies if name.startswith("plane-")], sorted(bodies)
@@ -175,9 +168,7 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
         for name, body in objects.items():
             mj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
             assert mj_body >= 0, f"{name} is not in the MuJoCo scene"
-            assert mass(body, client) == pytest.approx(
-                model.body_mass[mj_body], rel=1e-5
-            ), name
+            assert mass(body, client) == pytest.approx(model.body_mass[mj_body], rel=1e-5), name
 
     # Bodies collide with each other and the table, but for the pairs the file's comment says
     # start inside each other (their proxies may overlap in the space no sensor saw).

@@ -1,6 +1,7 @@
 """The Subscriber against a scripted fake daemon: the Hello check, the Subscribe it sends and
 the snapshot it takes the scene from, bodies, changing options, reconnection, no daemon yet; and
-who serves the socket (SO_PEERCRED), against a server of another user when run as root."""
+who serves the socket (SO_PEERCRED), against a server of another user when run as root.
+"""
 
 from __future__ import annotations
 
@@ -173,7 +174,9 @@ def wait_for_close(peer: Peer) -> None:
         pass
 
 
-def test_a_server_of_another_version_is_refused_saying_both_versions(sock: Path) -> None:
+def test_a_server_of_another_version_is_refused_saying_both_versions(
+    sock: Path,
+) -> None:
     daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(9, "tacmesh 9")))
     with pytest.raises(VersionMismatch, match=r"version 9.*version 3"):
         next(iter(Subscriber(sock, reconnect=False, timeout_s=5)))
@@ -187,7 +190,9 @@ def test_a_version_2_server_is_refused(sock: Path) -> None:
     daemon.join()
 
 
-def test_a_goodbye_instead_of_the_hello_is_a_refusal_with_its_reason(sock: Path) -> None:
+def test_a_goodbye_instead_of_the_hello_is_a_refusal_with_its_reason(
+    sock: Path,
+) -> None:
     reason = "uid 1000 is not in socket.allow_users"
     daemon = FakeDaemon(sock, lambda peer: peer.send(Goodbye(reason)))
     with pytest.raises(Refused, match="allow_users"):
@@ -242,7 +247,12 @@ def test_other_options_are_subscribed_with_resend_and_the_answer_is_the_scene(
 
     daemon = FakeDaemon(sock, script)
     with Subscriber(
-        sock, encoding="compact", max_rate_hz=5, kinds="objects", reconnect=False, timeout_s=5
+        sock,
+        encoding="compact",
+        max_rate_hz=5,
+        kinds="objects",
+        reconnect=False,
+        timeout_s=5,
     ) as sub:
         messages = list(sub)
     daemon.join()
@@ -298,7 +308,9 @@ def test_changing_options_and_asking_for_a_resend_mid_stream(sock: Path) -> None
     assert (sub.skipped, sub.filtered) == (1, 1)
 
 
-def test_bodies_are_asked_for_by_default_and_kept_beside_their_shapes(sock: Path) -> None:
+def test_bodies_are_asked_for_by_default_and_kept_beside_their_shapes(
+    sock: Path,
+) -> None:
     def script(peer: Peer) -> None:
         peer.send(HELLO, Session(1, 2), shape(1), body(1), shape(2), SnapshotDone())
         assert peer.receive() == DEFAULT_OPTIONS
@@ -547,7 +559,9 @@ def test_an_untrusted_server_is_not_retried_with_reconnect(
 ) -> None:
     # The fake daemon runs as this user: make it look like someone else's.
     monkeypatch.setattr(
-        subscriber_module, "server_credentials", lambda _: PeerCredentials(4242, 54321, 54321)
+        subscriber_module,
+        "server_credentials",
+        lambda _: PeerCredentials(4242, 54321, 54321),
     )
     daemon = FakeDaemon(sock, wait_for_close)
     sub = Subscriber(sock, timeout_s=5, backoff_s=0.01)
@@ -568,7 +582,8 @@ NOBODY = 65534
 
 class ServerOfAnotherUser:
     """A process that serves a Hello on a Unix socket as ``uid`` (root forks it and it drops to
-    that user before it listens, so that SO_PEERCRED names it), in a directory of its own."""
+    that user before it listens, so that SO_PEERCRED names it), in a directory of its own.
+    """
 
     def __init__(self, uid: int) -> None:
         self.directory = Path(tempfile.mkdtemp(prefix="tacmesh-peercred-"))

@@ -453,7 +453,10 @@ def same_shape_fields(a: Shape, b: Shape) -> None:
             latency_window=2048,
             frame_to_publish_p50_ms=12.5,
             frame_to_publish_p99_ms=40.0,
-            stages=(StageLatency("segment", 1.5, 3.0), StageLatency("é" * 32, 0.0, 0.0)),
+            stages=(
+                StageLatency("segment", 1.5, 3.0),
+                StageLatency("é" * 32, 0.0, 0.0),
+            ),
         ),
         Goodbye("SIGTERM received"),
         Goodbye("x" * 1024),
@@ -474,7 +477,14 @@ def test_server_messages_round_trip(message: AnyMessage) -> None:
         Subscribe(kinds=Kinds.OBJECTS | Kinds.SUPPORTS),
         SubscribeV1(),
     ],
-    ids=["default", "everything", "objects and bodies", "supports and bodies", "no bodies", "v1"],
+    ids=[
+        "default",
+        "everything",
+        "objects and bodies",
+        "supports and bodies",
+        "no bodies",
+        "v1",
+    ],
 )
 def test_client_messages_round_trip(message: AnyMessage) -> None:
     assert one(encode(message), "client") == message
@@ -752,7 +762,13 @@ POSE = encode(a_pose())
 # Frame offsets of Shape fields: 5 + the payload offset.
 FLAGS, ENCODING, RESIDUAL, BOX = 5 + 108, 5 + 121, 5 + 117, 5 + 130
 # Frame offsets in the Body example (4 vertices, 4 triangles, full; one hull of 4 and 4).
-B_PROXY, B_MARGIN, B_VOLUME, B_CENTRE, B_INERTIA = 5 + 16, 5 + 17, 5 + 21, 5 + 25, 5 + 37
+B_PROXY, B_MARGIN, B_VOLUME, B_CENTRE, B_INERTIA = (
+    5 + 16,
+    5 + 17,
+    5 + 21,
+    5 + 25,
+    5 + 37,
+)
 B_ENCODING, B_VERTEX_COUNT, B_VERTICES, B_TRIANGLES = 5 + 61, 5 + 62, 5 + 70, 5 + 118
 B_HULL_COUNT, B_HULL = 5 + 166, 5 + 167
 B_HULL_VERTICES, B_HULL_TRIANGLES = B_HULL + 3, B_HULL + 3 + 48
@@ -781,7 +797,11 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("a Shape shorter than its counts", shorter(SHAPE, 4), Truncated),
     ("a Shape longer than its counts", longer(SHAPE, bytes(12)), TrailingBytes),
     ("a compact Shape shorter than its counts", shorter(COMPACT, 2), Truncated),
-    ("a compact Shape longer than its counts", longer(COMPACT, bytes(6)), TrailingBytes),
+    (
+        "a compact Shape longer than its counts",
+        longer(COMPACT, bytes(6)),
+        TrailingBytes,
+    ),
     ("a short Stats", shorter(encode(Stats())), Truncated),
     (
         "a Stats with more stages than bytes",
@@ -789,7 +809,11 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         Truncated,
     ),
     ("a long Session", longer(encode(Session(1, 2))), TrailingBytes),
-    ("a server name that is not UTF-8", frame(0x01, b"\x02\x00\x02\x00\xff\xfe"), InvalidText),
+    (
+        "a server name that is not UTF-8",
+        frame(0x01, b"\x02\x00\x02\x00\xff\xfe"),
+        InvalidText,
+    ),
     ("a reason that is not UTF-8", frame(0x06, b"\x01\x00\xc3"), InvalidText),
     ("a server name over 64 bytes", unchecked(Hello(2, "a" * 65)), TextTooLong),
     ("a reason over 1024 bytes", unchecked(Goodbye("a" * 1025)), TextTooLong),
@@ -810,9 +834,21 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         patched(encode(Session(0, 0)), 5 + 16, b"\x02"),
         InvalidEnum,
     ),
-    ("a Session flag not defined", patched(encode(Session(0, 0)), 5 + 17, b"\x04"), InvalidFlags),
-    ("a Session of no kinds", patched(encode(Session(0, 0)), 5 + 22, b"\x00"), InvalidFlags),
-    ("a Session kind not defined", patched(encode(Session(0, 0)), 5 + 22, b"\x0f"), InvalidFlags),
+    (
+        "a Session flag not defined",
+        patched(encode(Session(0, 0)), 5 + 17, b"\x04"),
+        InvalidFlags,
+    ),
+    (
+        "a Session of no kinds",
+        patched(encode(Session(0, 0)), 5 + 22, b"\x00"),
+        InvalidFlags,
+    ),
+    (
+        "a Session kind not defined",
+        patched(encode(Session(0, 0)), 5 + 22, b"\x0f"),
+        InvalidFlags,
+    ),
     (
         "a Session of bodies alone",
         patched(encode(Session(0, 0)), 5 + 22, b"\x04"),
@@ -828,17 +864,37 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         patched(SHAPE, 5 + 130 + 4, struct.pack("<f", INF)),
         NonFinite,
     ),
-    ("a NaN rotation", unchecked(replace(a_pose(), rotation=(NAN, 0, 0, 1))), NonFinite),
-    ("an infinite translation", unchecked(replace(a_pose(), translation=(0, INF, 0))), NonFinite),
-    ("a NaN velocity", unchecked(replace(a_pose(), linear_velocity=(0, 0, NAN))), NonFinite),
-    ("an infinite spin", unchecked(replace(a_pose(), angular_velocity=(-INF, 0, 0))), NonFinite),
+    (
+        "a NaN rotation",
+        unchecked(replace(a_pose(), rotation=(NAN, 0, 0, 1))),
+        NonFinite,
+    ),
+    (
+        "an infinite translation",
+        unchecked(replace(a_pose(), translation=(0, INF, 0))),
+        NonFinite,
+    ),
+    (
+        "a NaN velocity",
+        unchecked(replace(a_pose(), linear_velocity=(0, 0, NAN))),
+        NonFinite,
+    ),
+    (
+        "an infinite spin",
+        unchecked(replace(a_pose(), angular_velocity=(-INF, 0, 0))),
+        NonFinite,
+    ),
     (
         "a Shape's NaN pose",
         unchecked(replace(a_shape(n=10), pose=replace(a_pose(), translation=(NAN, 0, 0)))),
         NonFinite,
     ),
     ("a NaN box", patched(COMPACT, BOX, struct.pack("<f", NAN)), NonFinite),
-    ("an infinite box", patched(COMPACT, BOX + 12 + 8, struct.pack("<f", INF)), NonFinite),
+    (
+        "an infinite box",
+        patched(COMPACT, BOX + 12 + 8, struct.pack("<f", INF)),
+        NonFinite,
+    ),
     (
         "a rotation of norm 1.01",
         unchecked(replace(a_pose(), rotation=(0.0, 0.0, 0.0, 1.01))),
@@ -862,7 +918,10 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     (
         "a compact triangle index out of range",
         unchecked(
-            replace(a_shape(Encoding.COMPACT, n=10), triangles=np.array([[9, 10, 0]], np.uint32))
+            replace(
+                a_shape(Encoding.COMPACT, n=10),
+                triangles=np.array([[9, 10, 0]], np.uint32),
+            )
         ),
         IndexOutOfRange,
     ),
@@ -871,16 +930,28 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         patched(COMPACT, BOX + 12 + 4, struct.pack("<f", -1e6)),
         BadBox,
     ),
-    ("a negative residual", unchecked(replace(a_shape(n=10), max_residual_m=-1.0)), InvalidNumber),
+    (
+        "a negative residual",
+        unchecked(replace(a_shape(n=10), max_residual_m=-1.0)),
+        InvalidNumber,
+    ),
     ("a NaN residual", patched(SHAPE, RESIDUAL, struct.pack("<f", NAN)), InvalidNumber),
     (
         "a negative rate",
         unchecked(Session(0, 0, Subscribe(max_rate_hz=-1.0))),
         InvalidNumber,
     ),
-    ("an infinite rate", unchecked(Session(0, 0, Subscribe(max_rate_hz=INF))), InvalidNumber),
+    (
+        "an infinite rate",
+        unchecked(Session(0, 0, Subscribe(max_rate_hz=INF))),
+        InvalidNumber,
+    ),
     ("a NaN latency", unchecked(Stats(frame_to_publish_p99_ms=NAN)), InvalidNumber),
-    ("a negative latency", unchecked(Stats(frame_to_publish_p50_ms=-1.0)), InvalidNumber),
+    (
+        "a negative latency",
+        unchecked(Stats(frame_to_publish_p50_ms=-1.0)),
+        InvalidNumber,
+    ),
     (
         "an infinite stage latency",
         unchecked(Stats(stages=(StageLatency("mesh", 1.0, INF),))),
@@ -901,18 +972,38 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         Truncated,
     ),
     ("a Body proxy not defined", patched(BODY_EXAMPLE, B_PROXY, b"\x03"), InvalidEnum),
-    ("a Body encoding not defined", patched(BODY_EXAMPLE, B_ENCODING, b"\x02"), InvalidEnum),
+    (
+        "a Body encoding not defined",
+        patched(BODY_EXAMPLE, B_ENCODING, b"\x02"),
+        InvalidEnum,
+    ),
     (
         "a shape proxy that carries a mesh",
         patched(BODY_EXAMPLE, B_PROXY, b"\x00"),
         BadBody,
     ),
     ("a zero volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", 0.0)), BadBody),
-    ("a negative volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", -1.0)), BadBody),
+    (
+        "a negative volume",
+        patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", -1.0)),
+        BadBody,
+    ),
     ("a NaN volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", NAN)), BadBody),
-    ("an infinite volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", INF)), BadBody),
-    ("a negative margin", patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", -0.1)), InvalidNumber),
-    ("a NaN margin", patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", NAN)), InvalidNumber),
+    (
+        "an infinite volume",
+        patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", INF)),
+        BadBody,
+    ),
+    (
+        "a negative margin",
+        patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", -0.1)),
+        InvalidNumber,
+    ),
+    (
+        "a NaN margin",
+        patched(BODY_EXAMPLE, B_MARGIN, struct.pack("<f", NAN)),
+        InvalidNumber,
+    ),
     (
         "a NaN centre of mass",
         patched(BODY_EXAMPLE, B_CENTRE + 4, struct.pack("<f", NAN)),
@@ -986,7 +1077,11 @@ CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         unchecked(Subscribe(object_ids=tuple(range(1025)))),
         CountOverCap,
     ),
-    ("an encoding not defined", patched(encode(DEFAULT_OPTIONS), 5, b"\x02"), InvalidEnum),
+    (
+        "an encoding not defined",
+        patched(encode(DEFAULT_OPTIONS), 5, b"\x02"),
+        InvalidEnum,
+    ),
     ("a flag not defined", patched(encode(DEFAULT_OPTIONS), 6, b"\x05"), InvalidFlags),
     ("no kinds", unchecked(Subscribe(kinds=Kinds(0))), InvalidFlags),
     ("bodies alone", unchecked(Subscribe(kinds=Kinds.BODIES)), InvalidFlags),
@@ -1038,7 +1133,10 @@ def test_last_seen_may_equal_the_pose_time() -> None:
         (Hello(2, "a" * 65), TextTooLong),
         (replace(a_pose(), rotation=(0.0, 0.0, 0.0, 2.0)), NotUnitQuaternion),
         (replace(a_pose(), last_seen_ns=0), TimesOutOfOrder),
-        (replace(a_shape(n=10), triangles=np.array([[0, 1, 10]], np.uint32)), IndexOutOfRange),
+        (
+            replace(a_shape(n=10), triangles=np.array([[0, 1, 10]], np.uint32)),
+            IndexOutOfRange,
+        ),
         (replace(a_shape(n=10), max_residual_m=NAN), InvalidNumber),
         (replace(a_shape(n=10), flags=8), InvalidFlags),
         (
@@ -1057,15 +1155,27 @@ def test_last_seen_may_equal_the_pose_time() -> None:
         (replace(DOC_BODY, volume_m3=0.0), BadBody),
         (replace(DOC_BODY, proxy=BodyProxy.SHAPE), BadBody),
         (replace(DOC_BODY, margin_m=-0.25), InvalidNumber),
-        (replace(DOC_BODY, centre_of_mass=np.array([0, NAN, 0], np.float32)), NonFinite),
-        (replace(DOC_BODY, triangles=np.array([[0, 1, 4]], np.uint32)), IndexOutOfRange),
+        (
+            replace(DOC_BODY, centre_of_mass=np.array([0, NAN, 0], np.float32)),
+            NonFinite,
+        ),
+        (
+            replace(DOC_BODY, triangles=np.array([[0, 1, 4]], np.uint32)),
+            IndexOutOfRange,
+        ),
         (replace(DOC_BODY, hulls=DOC_BODY.hulls * (MAX_HULLS + 1)), CountOverCap),
-        (replace(DOC_BODY, hulls=(Hull(TETRAHEDRON[:3], TETRAHEDRON_FACES[:1]),)), BadHull),
+        (
+            replace(DOC_BODY, hulls=(Hull(TETRAHEDRON[:3], TETRAHEDRON_FACES[:1]),)),
+            BadHull,
+        ),
         (
             replace(DOC_BODY, hulls=(Hull(TETRAHEDRON, np.array([[0, 1, 4]], np.uint8)),)),
             IndexOutOfRange,
         ),
-        (replace(DOC_BODY, inertia=np.arange(9, dtype=np.float32).reshape(3, 3)), ValueError),
+        (
+            replace(DOC_BODY, inertia=np.arange(9, dtype=np.float32).reshape(3, 3)),
+            ValueError,
+        ),
     ],
     ids=lambda x: x.__name__ if isinstance(x, type) else type(x).__name__,
 )
@@ -1198,7 +1308,9 @@ def body_of(object_id: int, version: int, proxy: BodyProxy = BodyProxy.SHADOW_VO
     body = replace(DOC_BODY, object_id=object_id, shape_version=version, proxy=proxy)
     if proxy is BodyProxy.SHAPE:
         body = replace(
-            body, vertices=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.uint32)
+            body,
+            vertices=np.zeros((0, 3), np.float32),
+            triangles=np.zeros((0, 3), np.uint32),
         )
     return body
 
@@ -1213,7 +1325,11 @@ def test_a_body_is_kept_beside_its_shape_and_placed_by_the_current_pose() -> Non
     assert scene.objects[1].body is body and scene.stale == 0
     # A Pose moves the body with the shape: half a turn about x, then (1, 2, 3).
     scene.apply(
-        replace(pose_of(1, 1, 20), rotation=(1.0, 0.0, 0.0, 0.0), translation=(1.0, 2.0, 3.0))
+        replace(
+            pose_of(1, 1, 20),
+            rotation=(1.0, 0.0, 0.0, 0.0),
+            translation=(1.0, 2.0, 3.0),
+        )
     )
     held = scene.objects[1]
     assert held.body is body and held.pose_time_ns == 20

@@ -86,7 +86,9 @@ def daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ZenohDaemon]:
         running.process.wait(timeout=30)
 
 
-def test_a_late_joiner_gets_the_scene_by_query_then_the_moves(daemon: ZenohDaemon) -> None:
+def test_a_late_joiner_gets_the_scene_by_query_then_the_moves(
+    daemon: ZenohDaemon,
+) -> None:
     with ZenohSubscriber(ROBOT, [daemon.endpoint], timeout_s=10) as sub:
         snapshot: list[object] = []
         for message in sub:

@@ -243,6 +243,7 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
         warned: Default::default(),
         held_still: Default::default(),
         overlapping: Default::default(),
+        primitives: Default::default(),
     });
     // With options of its own, the daemon's first snapshot (under the default options, sent
     // before it read them) is not what was asked for: everything up to the Session answering
@@ -389,6 +390,8 @@ struct PhysicsFiles {
     held_still: std::collections::HashSet<u64>,
     /// Pairs already said to start inside each other.
     overlapping: std::collections::HashSet<(String, String)>,
+    /// The primitive each object was last said to be (or none).
+    primitives: std::collections::HashMap<u64, Option<&'static str>>,
 }
 
 impl PhysicsFiles {
@@ -410,6 +413,22 @@ impl PhysicsFiles {
         for (id, why) in &update.held_still {
             if self.held_still.insert(*id) {
                 tracing::info!("object {id} is static in the physics scene: {why}");
+            }
+        }
+        for &(id, fit) in &update.primitives {
+            let kind = fit.map(|(kind, _)| kind);
+            let was = self.primitives.insert(id, kind).flatten();
+            match (was, fit) {
+                (was, Some((kind, residual_m))) if was != Some(kind) => tracing::info!(
+                    "object {id} is a {kind} in the physics scene ({:.1} mm from its shape at \
+                     the 95th percentile)",
+                    residual_m * 1e3
+                ),
+                (Some(was), None) => tracing::info!(
+                    "object {id} is no longer a {was} in the physics scene: no primitive \
+                     explains its new shape"
+                ),
+                _ => {}
             }
         }
         for (a, b, depth_m) in &update.overlaps {
