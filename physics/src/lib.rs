@@ -1,7 +1,7 @@
 //! What a physics engine needs from a mesh, beyond its distance to the truth: a closed,
 //! outward-facing surface for a solid, a closed collision proxy for a one-view shell, and
 //! convex parts with mass properties for a body that can move, and scenes of them all for
-//! MuJoCo (MJCF) and for Gazebo and PyBullet (SDF).
+//! MuJoCo (MJCF), for Gazebo and PyBullet (SDF) and for the tools that read URDF.
 
 pub mod convex;
 pub mod error;
@@ -15,6 +15,7 @@ pub mod scene;
 pub mod sdf;
 pub mod stl;
 pub mod support;
+pub mod urdf;
 
 pub use convex::{
     convex_parts, convex_parts_with, vhacd_part_points, ConvexConfig, ConvexParts, Decomposition,
@@ -32,3 +33,4 @@ pub use scene::{
 pub use sdf::{sdf_document, write_sdf, SdfConfig, SdfDocument};
 pub use support::{min_area_rectangle, rests_on, support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;
+pub use urdf::{urdf_documents, write_urdf, UrdfConfig, UrdfDocuments, WrittenUrdf};

@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::default_socket_path;
 use tacmesh::daemon::planes::FIRST_PLANE_ID;
-use tacmesh::physics::{write_mjcf, write_sdf, MjcfConfig, SdfConfig};
+use tacmesh::physics::{write_mjcf, write_sdf, write_urdf, MjcfConfig, SdfConfig, UrdfConfig};
 use tacmesh::physics_scene::PhysicsScene;
 use tacmesh::protocol::{Encoding, Kinds, Message, Pose, Scene, SceneChange, Shape, Subscribe};
 use tacmesh::source::monotonic_now;
@@ -29,21 +29,27 @@ pub struct SubscribeArgs {
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// With --out: also keep a MuJoCo scene of the objects there, DIR/scene.xml with its meshes
-    /// in DIR/meshes: each object a free body with the convex collision parts and mass
-    /// properties (at 500 kg/m³) of its published collision body (until it has one, of its
-    /// shape, an open one-view shell first extruded down onto its support), each support plane
-    /// a plane, gravity towards the largest. The objects' bodies do not collide with each other
-    /// (each is a conservative proxy, which may reach into another's unseen space); one that
-    /// does not stand on a support by itself is static. Rewritten whole after every new shape,
-    /// body or removal and at most once a second for moves
+    /// in DIR/meshes: each object a free body, the box, cylinder or sphere its shape is when
+    /// one explains it, else the convex collision parts and mass properties (at 500 kg/m³) of
+    /// its published collision body (until it has one, of its shape, an open one-view shell
+    /// first extruded down onto its support); each support a finite slab; gravity towards the
+    /// largest. Bodies collide with each other but for pairs that start inside each other; one
+    /// that does not stand on a support by itself is static. Rewritten whole after every new
+    /// shape, body or removal and at most once a second for moves
     #[arg(long, requires = "out")]
     mjcf: bool,
     /// With --out: also keep the same scene as an SDFormat world, DIR/scene.sdf (Gazebo loads
     /// it; PyBullet with loadSDF), its meshes in DIR/meshes beside the MuJoCo scene's: each
-    /// object a model with the same collision parts and mass, static where --mjcf's is, each
-    /// support plane a static plane, the same gravity. Kept as --mjcf keeps its scene
+    /// object a model with the same collision and mass, static where --mjcf's is, each support
+    /// a static slab, the same gravity. Kept as --mjcf keeps its scene
     #[arg(long, requires = "out")]
     sdf: bool,
+    /// With --out: also keep the scene as URDF, one robot per object and support in
+    /// DIR/urdf/NAME.urdf (URDF has no world: DIR/urdf/scene.json gives each one's pose, whether
+    /// it is static, the gravity and the pairs that must not collide), with the same meshes.
+    /// Kept as --mjcf keeps its scene
+    #[arg(long, requires = "out")]
+    urdf: bool,
     /// Exit after this many updates (shapes and poses; bodies are not counted)
     #[arg(long, value_name = "N")]
     count: Option<u64>,
@@ -235,9 +241,10 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     writeln!(out, "connected to {from}")?;
     let mut updates = 0u64;
     let mut scene = Scene::new();
-    let mut physics_files = (args.mjcf || args.sdf).then(|| PhysicsFiles {
+    let mut physics_files = (args.mjcf || args.sdf || args.urdf).then(|| PhysicsFiles {
         mjcf: args.mjcf,
         sdf: args.sdf,
+        urdf: args.urdf,
         physics: PhysicsScene::new(),
         written_at: None,
         warned: Default::default(),
@@ -376,12 +383,14 @@ fn subscribe(args: SubscribeArgs) -> anyhow::Result<()> {
     }
 }
 
-/// The physics scenes `--mjcf` and `--sdf` keep in the output folder.
+/// The physics scenes `--mjcf`, `--sdf` and `--urdf` keep in the output folder.
 struct PhysicsFiles {
     /// Write DIR/scene.xml.
     mjcf: bool,
     /// Write DIR/scene.sdf.
     sdf: bool,
+    /// Write DIR/urdf/.
+    urdf: bool,
     physics: PhysicsScene,
     written_at: Option<Instant>,
     /// Objects already warned about, so a shape that cannot collide is said once.
@@ -450,6 +459,24 @@ impl PhysicsFiles {
             let written = write_sdf(dir, &update.scene, &SdfConfig::default())
                 .with_context(|| format!("writing the SDF world in {}", dir.display()))?;
             keep.extend(written.mesh_files);
+        }
+        if self.urdf {
+            let written = write_urdf(dir, &update.scene, &UrdfConfig::default())
+                .with_context(|| format!("writing the URDF files in {}", dir.display()))?;
+            keep.extend(written.mesh_files);
+            // The robots of objects gone: the index no longer names them.
+            let robots: std::collections::HashSet<PathBuf> =
+                written.robot_files.into_iter().collect();
+            let urdf_dir = dir.join(tacmesh::physics::urdf::URDF_FOLDER);
+            for entry in std::fs::read_dir(&urdf_dir)
+                .with_context(|| format!("listing {}", urdf_dir.display()))?
+                .flatten()
+            {
+                let path = entry.path();
+                if path.extension().is_some_and(|e| e == "urdf") && !robots.contains(&path) {
+                    let _ = std::fs::remove_file(&path);
+                }
+            }
         }
         self.written_at = Some(Instant::now());
         // Meshes of objects gone, or parts an object no longer has: no scene names them.
