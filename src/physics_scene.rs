@@ -351,3 +351,72 @@ fn collision_parts(
     let parts = convex_parts(&proxy.mesh, &ConvexConfig::default()).map_err(|e| e.to_string())?;
     Ok((parts.hulls, parts.mesh_mass, proxy.kind))
 }
+
+/// A physics scene of meshes made offline (`tacmesh mesh --mjcf/--sdf/--urdf`): each object's
+/// mesh and each support's outline in one frame (the cloud's), as the daemon would publish
+/// them with identity poses, through the same [`PhysicsScene`] a subscriber keeps: each object
+/// with its id (from 1) and its simplification bound. With `free`, an object that stands on no support is
+/// free rather than static (one object meshed alone, for the user to place).
+pub fn offline_scene(
+    objects: &[(u64, TriMesh, f32)],
+    support_outlines: &[Vec<glam::Vec3>],
+    free: bool,
+) -> PhysicsUpdate {
+    use tacmesh_protocol::{
+        Encoding, Message, Pose, Shape, SimplifyStats, SHAPE_CLOSED, SHAPE_SUPPORT,
+    };
+    let mut scene = Scene::new();
+    let shape = |id: u64, mesh: TriMesh, flags: u8, residual_m: f32| Shape {
+        pose: Pose {
+            object_id: id,
+            shape_version: 1,
+            pose_time_ns: 0,
+            pose_time_realtime_ns: 0,
+            last_seen_ns: 0,
+            rotation: glam::Quat::IDENTITY,
+            translation: glam::Vec3::ZERO,
+            linear_velocity: glam::Vec3::ZERO,
+            angular_velocity: glam::Vec3::ZERO,
+        },
+        shape_time_ns: 0,
+        shape_time_realtime_ns: 0,
+        flags,
+        report: SimplifyStats {
+            faces_in: mesh.triangles.len() as u32,
+            faces_out: mesh.triangles.len() as u32,
+            max_residual_m: residual_m,
+        },
+        mesh,
+        encoding: Encoding::Full,
+    };
+    for (k, outline) in support_outlines.iter().enumerate() {
+        let fan = crate::daemon::planes::fan(outline);
+        scene.apply(&Message::Shape(shape(
+            FIRST_PLANE_ID + k as u64,
+            fan,
+            SHAPE_SUPPORT,
+            0.0,
+        )));
+    }
+    for (id, mesh, residual_m) in objects {
+        let flags = if mesh.is_closed() { SHAPE_CLOSED } else { 0 };
+        scene.apply(&Message::Shape(shape(
+            *id,
+            mesh.clone(),
+            flags,
+            *residual_m,
+        )));
+    }
+    let mut update = PhysicsScene::new().update(&scene);
+    if free {
+        for body in &mut update.scene.bodies {
+            if body.motion == Motion::Static && body.mass.implausible().is_none() {
+                body.motion = Motion::Dynamic;
+            }
+        }
+        update
+            .held_still
+            .retain(|(_, why)| why != "it stands on no support");
+    }
+    update
+}

@@ -626,3 +626,80 @@ fn error_target_mode_reaches_half_table1_faces_on_the_sphere() {
         String::from_utf8_lossy(&bad.stderr)
     );
 }
+
+/// `mesh --mjcf/--sdf/--urdf` writes the body `subscribe` would keep: one closed cloud gives
+/// one free body whose mass is its volume at 500 kg/m³; a real one-view scan with --objects
+/// gives its objects on the table as a finite slab.
+#[test]
+fn mesh_writes_the_physics_body_of_an_offline_cloud() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cloud = dir.path().join("cube.ply");
+    tacmesh_ok(&[
+        "sim",
+        "sample",
+        "cube",
+        "--noise-mm",
+        "5",
+        "--points",
+        "20000",
+        "--seed",
+        "1",
+        "-o",
+        path_str(&cloud),
+    ]);
+    let scene_dir = dir.path().join("scene");
+    let report = tacmesh_json(&[
+        "mesh",
+        path_str(&cloud),
+        "-o",
+        path_str(&dir.path().join("cube.obj")),
+        "--mjcf",
+        path_str(&scene_dir),
+        "--urdf",
+        path_str(&scene_dir),
+        "--json",
+    ]);
+    let volume = report["volume_m3"]
+        .as_f64()
+        .expect("a closed mesh has a volume");
+    let xml = std::fs::read_to_string(scene_dir.join("scene.xml")).expect("scene.xml");
+    assert_eq!(xml.matches("<freejoint").count(), 1, "{xml}");
+    let mass: f64 = xml
+        .split(r#"mass=""#)
+        .nth(1)
+        .and_then(|rest| rest.split('"').next())
+        .and_then(|m| m.parse().ok())
+        .expect("an inertial mass");
+    // The body is the mesh's convex parts; its mass the mesh's own volume at 500 kg/m³.
+    assert!(
+        (mass / (500.0 * volume) - 1.0).abs() < 0.02,
+        "{mass} kg for {volume} m³"
+    );
+    let index = std::fs::read_to_string(scene_dir.join("urdf/scene.json")).expect("scene.json");
+    assert!(index.contains(r#""static": false"#), "{index}");
+
+    let milk = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/testdata/pointclouds/pcl/milk_cartoon_all_small_clorox.pcd"
+    );
+    let objects_dir = dir.path().join("objects");
+    let scene_dir = dir.path().join("milk");
+    let out = tacmesh_logging(
+        &[
+            "mesh",
+            milk,
+            "--objects",
+            "-o",
+            path_str(&objects_dir),
+            "--mjcf",
+            path_str(&scene_dir),
+        ],
+        "info",
+    );
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{log}");
+    let xml = std::fs::read_to_string(scene_dir.join("scene.xml")).expect("scene.xml");
+    assert!(xml.contains(r#"class="support" type="box""#), "{xml}");
+    assert!(!xml.contains(r#"type="plane""#), "{xml}");
+    assert!(xml.matches("<freejoint").count() >= 4, "{log}\n{xml}");
+}

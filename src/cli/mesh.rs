@@ -63,6 +63,83 @@ pub struct MeshArgs {
     /// support planes, unassigned and invalid points)
     #[arg(long)]
     objects: bool,
+    /// Also write a MuJoCo scene of what was meshed into the folder DIR (scene.xml, meshes/):
+    /// the body `tacmesh subscribe --mjcf` would keep of it (a box, cylinder or sphere when one
+    /// explains the mesh, else its convex parts, an open one-view shell first closed down onto
+    /// its support; mass at 500 kg/m³). One cloud gives one free body; with --objects, the
+    /// scene's objects on its supports as finite slabs
+    #[arg(long, value_name = "DIR")]
+    mjcf: Option<PathBuf>,
+    /// As --mjcf, as an SDFormat world (DIR/scene.sdf) for Gazebo and PyBullet
+    #[arg(long, value_name = "DIR")]
+    sdf: Option<PathBuf>,
+    /// As --mjcf, as URDF: one robot per body and support in DIR/urdf/ and DIR/urdf/scene.json
+    /// placing them
+    #[arg(long, value_name = "DIR")]
+    urdf: Option<PathBuf>,
+}
+
+impl MeshArgs {
+    fn wants_physics(&self) -> bool {
+        self.mjcf.is_some() || self.sdf.is_some() || self.urdf.is_some()
+    }
+}
+
+/// Writes the physics files `--mjcf`, `--sdf` and `--urdf` ask for, of `objects` (meshes with
+/// their residual bounds) on `supports` (outlines), and says what each object became.
+fn write_physics(
+    args: &MeshArgs,
+    objects: &[(u64, tacmesh::TriMesh, f32)],
+    supports: &[Vec<Vec3>],
+) -> anyhow::Result<()> {
+    let update = tacmesh::physics_scene::offline_scene(objects, supports, !args.objects);
+    anyhow::ensure!(
+        !update.scene.bodies.is_empty(),
+        "no body could be made of what was meshed: {}",
+        update
+            .left_out
+            .iter()
+            .map(|(id, why)| format!("object {id}: {why}"))
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
+    for (id, why) in &update.left_out {
+        tracing::warn!("object {id} is left out of the physics scene: {why}");
+    }
+    for (id, why) in &update.held_still {
+        tracing::info!("object {id} is static in the physics scene: {why}");
+    }
+    for (id, fit) in &update.primitives {
+        if let Some((kind, residual_m)) = fit {
+            tracing::info!(
+                "object {id} is a {kind} ({:.1} mm from its mesh at the 95th percentile)",
+                residual_m * 1e3
+            );
+        }
+    }
+    for (a, b, depth_m) in &update.overlaps {
+        tracing::info!(
+            "{a} and {b} start {:.0} mm inside each other: they do not collide with each other",
+            depth_m * 1e3
+        );
+    }
+    use tacmesh::physics::{write_mjcf, write_sdf, write_urdf, MjcfConfig, SdfConfig, UrdfConfig};
+    if let Some(dir) = &args.mjcf {
+        let written = write_mjcf(dir, &update.scene, &MjcfConfig::default())
+            .with_context(|| format!("writing the MuJoCo scene in {}", dir.display()))?;
+        tracing::info!("wrote {}", written.scene_file.display());
+    }
+    if let Some(dir) = &args.sdf {
+        let written = write_sdf(dir, &update.scene, &SdfConfig::default())
+            .with_context(|| format!("writing the SDF world in {}", dir.display()))?;
+        tracing::info!("wrote {}", written.scene_file.display());
+    }
+    if let Some(dir) = &args.urdf {
+        let written = write_urdf(dir, &update.scene, &UrdfConfig::default())
+            .with_context(|| format!("writing the URDF files in {}", dir.display()))?;
+        tracing::info!("wrote {}", written.index_file.display());
+    }
+    Ok(())
 }
 
 fn parse_target_mhe(s: &str) -> Result<f32, String> {
@@ -177,6 +254,9 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         report.voxel_size_m
     );
     tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
+    if args.wants_physics() {
+        write_physics(&args, &[(1, mesh, report.max_residual)], &[])?;
+    }
     if args.json {
         super::print_json(&MeshOutput {
             non_finite_points: file.non_finite,
@@ -303,6 +383,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     );
     let config = mesh_config(args, Some(viewpoint));
     let mut reports = Vec::new();
+    let mut meshed = Vec::new();
     for (k, indices) in segmentation.objects.iter().enumerate() {
         let id = k + 1;
         let points = indices.iter().map(|&i| cloud.points[i as usize]).collect();
@@ -311,6 +392,9 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
         match mesh_cloud(&object, &config) {
             Ok((mesh, report)) => {
                 tacmesh::formats::write_mesh(&file, &mesh).context("writing the mesh")?;
+                if args.wants_physics() {
+                    meshed.push((id as u64, mesh, report.max_residual));
+                }
                 tracing::info!(
                     points = report.points,
                     faces = report.faces,
@@ -341,6 +425,10 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
             "s"
         }
     );
+    if args.wants_physics() {
+        let outlines: Vec<Vec<Vec3>> = segmentation.planes.iter().map(|p| p.outline()).collect();
+        write_physics(args, &meshed, &outlines)?;
+    }
     let labels_path = dir.join("labels.txt");
     let mut labels = String::with_capacity(segmentation.labels.len() * 2);
     for label in &segmentation.labels {
