@@ -125,11 +125,22 @@ pub fn collision_proxy(
 ) -> Proxy {
     let faced = orientation(visual);
     if faced.is_closed() || visual.triangles.is_empty() {
+        // A closed surface that encloses a negative volume faces in (a small blob whose
+        // orientation the mesher got backwards): turned inside out, it is its own proxy.
+        let inward = faced.is_closed() && faced.signed_volume_m3 < 0.0;
+        let mesh = if inward {
+            TriMesh::new(
+                visual.vertices.clone(),
+                visual.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect(),
+            )
+        } else {
+            visual.clone()
+        };
         return Proxy {
-            mesh: visual.clone(),
+            mesh,
             kind: ProxyKind::Surface,
             closed: faced.is_closed(),
-            volume_m3: faced.signed_volume_m3,
+            volume_m3: faced.signed_volume_m3.abs(),
             capped_vertices: 0,
         };
     }
@@ -304,6 +315,21 @@ mod tests {
         normal: Vec3::Z,
         offset: 0.0,
     };
+
+    #[test]
+    fn a_closed_surface_facing_in_is_turned_out() {
+        let cube = tacmesh_sim::cube(0.1);
+        let inward = TriMesh::new(
+            cube.vertices.clone(),
+            cube.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect(),
+        );
+        let proxy = collision_proxy(&inward, None, Some(TABLE), &ProxyConfig::default());
+        assert_eq!(proxy.kind, ProxyKind::Surface);
+        assert!(proxy.closed);
+        assert!((proxy.volume_m3 - 0.001).abs() < 1e-6, "{}", proxy.volume_m3);
+        let mass = crate::mass::MassProperties::of_closed_mesh(&proxy.mesh).expect("outward");
+        assert!((mass.volume_m3 - 0.001).abs() < 1e-6);
+    }
 
     #[test]
     fn a_top_seen_from_straight_above_closes_into_its_box() {
