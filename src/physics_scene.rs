@@ -26,8 +26,9 @@ use tacmesh_physics::scene::{
     SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
 };
 use tacmesh_physics::{
-    convex_parts, fit_primitive, lift_onto_supports, rests_on, starting_overlaps, surface_points,
-    ConvexConfig, MassProperties, Primitive, WorldSupport, LIFT_MAX_M, OVERLAP_TOLERANCE_M,
+    convex_parts, fit_closed_primitive, fit_primitive, lift_onto_supports, rests_on,
+    starting_overlaps, surface_points, ConvexConfig, MassProperties, Primitive, WorldSupport,
+    LIFT_MAX_M, OVERLAP_TOLERANCE_M,
 };
 use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
@@ -148,11 +149,13 @@ impl PhysicsScene {
             });
             if stale {
                 let support = support_under(&supports, object, world_from_object);
-                let primitive = fit_primitive(
-                    &surface_points(&object.shape.mesh),
-                    support,
-                    object.shape.report.max_residual_m + PRIMITIVE_NOISE_M,
-                );
+                let points = surface_points(&object.shape.mesh);
+                let bound_m = object.shape.report.max_residual_m + PRIMITIVE_NOISE_M;
+                // Resting on its support; a closed shape on nothing known, in any orientation.
+                let primitive = match support {
+                    None if object.shape.mesh.is_closed() => fit_closed_primitive(&points, bound_m),
+                    _ => fit_primitive(&points, support, bound_m),
+                };
                 primitives.push((id, primitive.map(|p| (p.shape.name(), p.residual_m))));
                 let parts = match &object.body {
                     Some(body) => Ok(published_parts(body)),

@@ -24,7 +24,9 @@ pub use error::PhysicsError;
 pub use mass::MassProperties;
 pub use mjcf::{mjcf_document, write_mjcf, MjcfConfig, MjcfDocument};
 pub use overlap::{lift_onto_supports, starting_overlaps, LIFT_MAX_M, OVERLAP_TOLERANCE_M};
-pub use primitive::{fit_primitive, surface_points, Primitive, PrimitiveShape};
+pub use primitive::{
+    fit_closed_primitive, fit_primitive, surface_points, Primitive, PrimitiveShape,
+};
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
 pub use scene::{
     Exclusion, Member, Motion, Scene, SceneBody, SceneSupport, WorldFromBody, WrittenScene,

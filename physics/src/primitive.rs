@@ -114,6 +114,14 @@ impl Primitive {
     /// 24 sides, a sphere of 16 × 8), for what needs a mesh: the convex parts an engine without
     /// the primitive collides with, the overlap and footprint checks.
     pub fn mesh(&self) -> TriMesh {
+        self.mesh_with(24, 8)
+    }
+
+    /// As [`Primitive::mesh`], with `around` sides to a cylinder and a sphere, and `rings`
+    /// rings to a sphere (fine enough to measure contact against: 128 × 64 is within 0.03 %
+    /// of the radius).
+    pub fn mesh_with(&self, around: u32, rings: u32) -> TriMesh {
+        let (around, rings) = (around.max(3), rings.max(2));
         let local = match self.shape {
             PrimitiveShape::Box { half_m } => {
                 let mut mesh = box_mesh();
@@ -125,8 +133,8 @@ impl Primitive {
             PrimitiveShape::Cylinder {
                 radius_m,
                 half_height_m,
-            } => cylinder_mesh(24, radius_m, half_height_m),
-            PrimitiveShape::Sphere { radius_m } => sphere_mesh(16, 8, radius_m),
+            } => cylinder_mesh(around, radius_m, half_height_m),
+            PrimitiveShape::Sphere { radius_m } => sphere_mesh(2 * rings, rings, radius_m),
         };
         TriMesh::new(
             local
@@ -591,6 +599,124 @@ fn rests(primitive: &Primitive, support: Option<SupportPlane>) -> bool {
     (support.height(primitive.centre) - reach).abs() <= 0.01
 }
 
+/// The principal axes of `points` (unit, columns of a rotation) and their mean.
+fn principal_axes(points: &[Vec3]) -> (Vec3, [Vec3; 3]) {
+    let mean = points.iter().copied().sum::<Vec3>() / points.len().max(1) as f32;
+    let mut covariance = Mat3::ZERO;
+    for p in points {
+        let d = *p - mean;
+        covariance += Mat3::from_cols(d * d.x, d * d.y, d * d.z);
+    }
+    let eigen = parry3d::math::SymmetricEigen3::new(covariance);
+    let v = eigen.eigenvectors;
+    let (a, b) = (
+        v.x_axis.normalize_or(Vec3::X),
+        v.y_axis.normalize_or(Vec3::Y),
+    );
+    (mean, [a, b, a.cross(b).normalize_or(Vec3::Z)])
+}
+
+/// A box in any orientation: the points' principal axes and extents, refined (centre, turn,
+/// half sides).
+fn free_box(points: &[Vec3]) -> Option<Primitive> {
+    let (mean, [x, y, z]) = principal_axes(points);
+    let base = Quat::from_mat3(&Mat3::from_cols(x, y, z)).normalize();
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for p in points {
+        let q = base.inverse() * (*p - mean);
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    let centre = mean + base * (0.5 * (lo + hi));
+    let half = 0.5 * (hi - lo);
+    let make = |p: &[f32; 9]| {
+        let half_m = Vec3::new(p[6], p[7], p[8]);
+        (half_m.min_element() > 0.0).then(|| Primitive {
+            shape: PrimitiveShape::Box { half_m },
+            rotation: (base * Quat::from_scaled_axis(Vec3::new(p[3], p[4], p[5]))).normalize(),
+            centre: Vec3::new(p[0], p[1], p[2]),
+            residual_m: 0.0,
+        })
+    };
+    let start = [
+        centre.x, centre.y, centre.z, 0.0, 0.0, 0.0, half.x, half.y, half.z,
+    ];
+    let best = refine(start, points, make).unwrap_or(start);
+    make(&best)
+}
+
+/// A cylinder in any orientation: its axis one of the points' principal axes (whichever fits
+/// best), refined (centre, axis, radius, half height).
+fn free_cylinder(points: &[Vec3]) -> Option<Primitive> {
+    let (mean, axes) = principal_axes(points);
+    axes.iter()
+        .filter_map(|&axis| {
+            let turn = Quat::from_rotation_arc(Vec3::Z, axis);
+            let (mut lo, mut hi, mut radius) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
+            for p in points {
+                let q = turn.inverse() * (*p - mean);
+                lo = lo.min(q.z);
+                hi = hi.max(q.z);
+                radius += Vec2::new(q.x, q.y).length();
+            }
+            radius /= points.len() as f32;
+            let centre = mean + axis * (0.5 * (lo + hi));
+            let make = |p: &[f32; 7]| {
+                (p[5] > 0.0 && p[6] > 0.0).then(|| Primitive {
+                    shape: PrimitiveShape::Cylinder {
+                        radius_m: p[5],
+                        half_height_m: p[6],
+                    },
+                    rotation: (turn * Quat::from_scaled_axis(Vec3::new(p[3], p[4], 0.0)))
+                        .normalize(),
+                    centre: Vec3::new(p[0], p[1], p[2]),
+                    residual_m: 0.0,
+                })
+            };
+            let start = [
+                centre.x,
+                centre.y,
+                centre.z,
+                0.0,
+                0.0,
+                radius,
+                0.5 * (hi - lo),
+            ];
+            let best = refine(start, points, make).unwrap_or(start);
+            make(&best).map(|c| Primitive {
+                residual_m: residual(&c, points),
+                ..c
+            })
+        })
+        .min_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
+}
+
+/// As [`fit_primitive`], for the points of a closed surface that stands on nothing known (a
+/// multi-view object, an offline cloud): a sphere, or a box or a cylinder in any orientation.
+/// Only for closed surfaces: on a one-view shell a box as deep as what was seen fits as well
+/// as the true one.
+pub fn fit_closed_primitive(points: &[Vec3], bound_m: f32) -> Option<Primitive> {
+    let points: Vec<Vec3> = points.iter().copied().filter(|p| p.is_finite()).collect();
+    if points.len() < 8 || bound_m.is_nan() || bound_m <= 0.0 {
+        return None;
+    }
+    let candidates = [
+        sphere(&points, None),
+        free_box(&points),
+        free_cylinder(&points),
+    ];
+    candidates
+        .into_iter()
+        .flatten()
+        .filter(|c| c.shape.volume_m3().is_finite() && c.shape.volume_m3() > 0.0)
+        .map(|c| Primitive {
+            residual_m: residual(&c, &points),
+            ..c
+        })
+        .filter(|c| c.residual_m <= bound_m)
+        .min_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
+}
+
 /// The primitive that explains `points` (what was seen of an object, in its frame) best, if
 /// one explains them within `bound_m` (95th percentile of the distances): of a box, a standing
 /// or lying cylinder and a sphere, each resting on `support` when there is one.
@@ -782,6 +908,45 @@ mod tests {
             residual_m: 0.0,
         };
         check(truth, "sphere");
+    }
+
+    /// Points all over a primitive's surface (a closed, multi-view object), with noise.
+    fn all_round(primitive: &Primitive, n: usize, sigma: f32) -> Vec<Vec3> {
+        // Seen from six sides far away: every face.
+        [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z]
+            .iter()
+            .flat_map(|&d| seen(primitive, primitive.centre + d * 100.0, n / 6, sigma))
+            .collect()
+    }
+
+    #[test]
+    fn closed_objects_standing_on_nothing_known_are_fitted_in_any_orientation() {
+        let turn = Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 0.9);
+        for truth in [
+            Primitive {
+                shape: PrimitiveShape::Box {
+                    half_m: Vec3::new(0.2, 0.1, 0.05),
+                },
+                rotation: turn,
+                centre: Vec3::new(1.0, -0.5, 0.2),
+                residual_m: 0.0,
+            },
+            Primitive {
+                shape: PrimitiveShape::Cylinder {
+                    radius_m: 0.25,
+                    half_height_m: 0.5,
+                },
+                rotation: turn,
+                centre: Vec3::new(0.0, 0.2, 0.3),
+                residual_m: 0.0,
+            },
+        ] {
+            let points = all_round(&truth, 6000, 0.002);
+            let fit = fit_closed_primitive(&points, 0.006).expect("a primitive");
+            assert_eq!(fit.shape.name(), truth.shape.name(), "{fit:?}");
+            let ratio = fit.mass().volume_m3 / truth.mass().volume_m3;
+            assert!((0.95..1.05).contains(&ratio), "{ratio}: {fit:?}");
+        }
     }
 
     #[test]

@@ -131,7 +131,11 @@ pub fn collision_proxy(
         let mesh = if inward {
             TriMesh::new(
                 visual.vertices.clone(),
-                visual.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect(),
+                visual
+                    .triangles
+                    .iter()
+                    .map(|&[a, b, c]| [a, c, b])
+                    .collect(),
             )
         } else {
             visual.clone()
@@ -326,7 +330,11 @@ mod tests {
         let proxy = collision_proxy(&inward, None, Some(TABLE), &ProxyConfig::default());
         assert_eq!(proxy.kind, ProxyKind::Surface);
         assert!(proxy.closed);
-        assert!((proxy.volume_m3 - 0.001).abs() < 1e-6, "{}", proxy.volume_m3);
+        assert!(
+            (proxy.volume_m3 - 0.001).abs() < 1e-6,
+            "{}",
+            proxy.volume_m3
+        );
         let mass = crate::mass::MassProperties::of_closed_mesh(&proxy.mesh).expect("outward");
         assert!((mass.volume_m3 - 0.001).abs() < 1e-6);
     }

@@ -65,6 +65,13 @@ pub struct EvalArgs {
     /// side that touch surfaces facing it (for the open mesh of a one-view scan)
     #[arg(long, value_name = "X,Y,Z", value_parser = super::parse_vec3, allow_hyphen_values = true, requires = "contact")]
     viewpoint: Option<Vec3>,
+    /// Also measure contact, from every side, against the body an engine would collide with
+    /// instead of the candidate mesh: the box, cylinder or sphere the candidate is when one
+    /// explains it (in any orientation for a closed candidate; an open one only as a sphere:
+    /// offline there is no support to stand it on), else the convex hulls of its closed proxy
+    /// (an open one-view mesh closed along the rays from --viewpoint)
+    #[arg(long, requires = "contact")]
+    body: bool,
 }
 
 fn parse_radius_mm(s: &str) -> Result<f32, String> {
@@ -95,6 +102,59 @@ struct EvalReport {
     samples_per_side: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     contact: Option<ContactReport>,
+    /// What the body is (`sphere`, `3 hulls of the shadow volume`…), with --body.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    body: Option<String>,
+    /// Contact against the body, from every side, with --body.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    body_contact: Option<ContactReport>,
+}
+
+/// The surface an engine collides with for `candidate` (see `EvalArgs::body`), and what it is.
+fn body_surface(
+    candidate: &tacmesh::TriMesh,
+    viewpoint: Option<Vec3>,
+) -> anyhow::Result<(tacmesh::TriMesh, String)> {
+    use tacmesh::physics::{
+        collision_proxy, convex_parts, fit_closed_primitive, fit_primitive, surface_points,
+        ConvexConfig, ProxyConfig,
+    };
+    let extent = candidate
+        .bounds()
+        .map_or(0.0, |(lo, hi)| (hi - lo).max_element());
+    // The pipeline's default residual bound, 2.5 % of the extent, and the same 3 mm of noise
+    // the subscriber allows a primitive.
+    let bound_m = 0.025 * extent + 0.003;
+    let points = surface_points(candidate);
+    let primitive = if candidate.is_closed() {
+        fit_closed_primitive(&points, bound_m)
+    } else {
+        fit_primitive(&points, None, bound_m)
+    };
+    if let Some(primitive) = primitive {
+        return Ok((
+            primitive.mesh_with(128, 64),
+            primitive.shape.name().to_owned(),
+        ));
+    }
+    let proxy = collision_proxy(candidate, viewpoint, None, &ProxyConfig::default());
+    anyhow::ensure!(
+        proxy.closed,
+        "the candidate has no body: it is open and no --viewpoint closes it"
+    );
+    let parts = convex_parts(&proxy.mesh, &ConvexConfig::default())?;
+    let mut union = tacmesh::TriMesh::new(Vec::new(), Vec::new());
+    for hull in &parts.hulls {
+        let base = union.vertices.len() as u32;
+        union.vertices.extend(&hull.vertices);
+        union
+            .triangles
+            .extend(hull.triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    Ok((
+        union,
+        format!("{} hulls of the {}", parts.hulls.len(), proxy.kind.as_str()),
+    ))
 }
 
 /// `--contact` in the JSON: lengths in millimetres, angles in degrees.
@@ -242,6 +302,21 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     } else {
         None
     };
+    let (body, body_contact) = if args.body {
+        let (surface, what) = body_surface(&candidate, args.viewpoint).with_context(comparing)?;
+        let config = ContactConfig {
+            probe_radii_m: args.probe_radii_mm.iter().map(|mm| mm / 1e3).collect(),
+            push_m: args.push_mm / 1e3,
+            probe_lines: args.probes as usize,
+            seed: args.seed,
+            viewpoint_m: None,
+            ..ContactConfig::default()
+        };
+        let fidelity = contact_fidelity(&reference, &surface, &config).with_context(comparing)?;
+        (Some(what), Some(ContactReport::new(&fidelity, None)))
+    } else {
+        (None, None)
+    };
     let report = EvalReport {
         mhe: d.mhe_m,
         mean_reference_to_candidate: d.mean_reference_to_candidate_m,
@@ -254,6 +329,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         reference_faces: reference.triangles.len(),
         samples_per_side: d.samples_per_side,
         contact,
+        body,
+        body_contact,
     };
     if args.json {
         return super::print_json(&report);
@@ -262,8 +339,12 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         "mhe {:.5} m  hausdorff {:.5} m  rms {:.5} m  faces {} (reference {})",
         report.mhe, report.hausdorff, report.rms, report.faces, report.reference_faces
     ))?;
-    match &report.contact {
-        Some(contact) => super::print_line(&contact.table()),
-        None => Ok(()),
+    if let Some(contact) = &report.contact {
+        super::print_line(&contact.table())?;
     }
+    if let (Some(what), Some(contact)) = (&report.body, &report.body_contact) {
+        super::print_line(&format!("body: {what}, probed from every side"))?;
+        super::print_line(&contact.table())?;
+    }
+    Ok(())
 }
