@@ -21,8 +21,10 @@
 //!    concavity bound (parry's V-HACD only bounds the depth of its splits, so it may return
 //!    up to twice `max_hulls` parts, and it splits off slivers a merge costs nothing to undo);
 //! 6. **reduce** each hull to at most [`ConvexConfig::max_hull_vertices`] by growing it from
-//!    four extreme vertices, always adding the vertex farthest outside, so the reduced hull
-//!    lies inside the full one and misses it by at most [`ConvexParts::hull_reduction_m`].
+//!    four extreme vertices, always adding the vertex farthest outside, then growing the
+//!    reduced hull about its centroid until it holds every vertex of the full one, so that the
+//!    hulls still cover the mesh; the farthest a vertex moved out is
+//!    [`ConvexParts::hull_reduction_m`].
 //!
 //! Entry point: [`convex_parts`].
 
@@ -88,8 +90,8 @@ pub struct ConvexParts {
     pub mesh_mass: MassProperties,
     /// How the parts were found.
     pub decomposition: Decomposition,
-    /// The farthest any vertex of a full hull lies outside its reduced hull, metres (0 when
-    /// no hull needed reducing).
+    /// How far a reduced hull reaches beyond its full one, metres: its farthest vertex's move
+    /// when it was grown to hold the full hull (0 when no hull needed reducing).
     pub hull_reduction_m: f32,
 }
 
@@ -351,9 +353,47 @@ fn reduce_hull(hull: Hull, max_vertices: usize) -> (Hull, f32) {
             .max_by(|x, y| x.1.total_cmp(&y.1));
         match worst {
             None => return (current, 0.0),
-            Some((_, outside)) if chosen.len() >= max_vertices => return (current, outside),
+            Some(_) if chosen.len() >= max_vertices => return grown_to_cover(current, &points),
             Some((i, _)) => chosen.push(i),
         }
+    }
+}
+
+/// `reduced` grown about its centroid just enough that every one of `points` is inside it, so
+/// that a reduced hull still covers what its full hull covered (docs/protocol.md promises the
+/// hulls cover the proxy; a hull reduced inside its full one once left 6.5 mm of a proxy
+/// uncovered). Returns it and how far its farthest vertex moved out.
+fn grown_to_cover(reduced: Hull, points: &[Vec3]) -> (Hull, f32) {
+    let centre = reduced.points.iter().copied().sum::<Vec3>() / reduced.points.len() as f32;
+    // Each face's plane n·(x − c) = d, d > 0 for a centroid inside: a point p is inside the
+    // hull grown by s when n·(p − c) ≤ s·d for every face.
+    let mut scale = 1.0f32;
+    for &[a, b, c] in &reduced.triangles {
+        let [a, b, c] = [a, b, c].map(|i| reduced.points[i as usize]);
+        let Some(normal) = (b - a).cross(c - a).try_normalize() else {
+            continue;
+        };
+        let d = normal.dot(a - centre);
+        if d <= 1e-9 {
+            continue;
+        }
+        for &p in points {
+            scale = scale.max(normal.dot(p - centre) / d);
+        }
+    }
+    let moved = reduced
+        .points
+        .iter()
+        .map(|v| (*v - centre).length() * (scale - 1.0))
+        .fold(0.0f32, f32::max);
+    let grown: Vec<Vec3> = reduced
+        .points
+        .iter()
+        .map(|&v| centre + (v - centre) * scale)
+        .collect();
+    match Hull::of(&grown) {
+        Some(hull) => (hull, moved),
+        None => (reduced, 0.0),
     }
 }
 
@@ -467,9 +507,14 @@ mod tests {
         let hull = &parts.hulls[0];
         assert!(hull.vertices.len() <= config.max_hull_vertices);
         assert_closed_outward(hull);
-        // The reduced hull lies inside the sphere and misses it by a few centimetres at most.
+        // The reduced hull is grown to hold every vertex of the sphere: it covers it, and
+        // reaches a few centimetres at most beyond it.
         assert!(parts.hull_reduction_m > 0.0 && parts.hull_reduction_m < 0.05);
-        assert!(parts.volume_ratio() < 1.0 && parts.volume_ratio() > 0.85);
+        let grown = Hull::of(&hull.vertices).expect("a hull");
+        for &v in &sphere.vertices {
+            assert!(grown.distance_outside(v) <= 1e-5, "{v} is outside the hull");
+        }
+        assert!(parts.volume_ratio() >= 1.0 && parts.volume_ratio() < 1.15);
     }
 
     #[test]
