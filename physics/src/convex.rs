@@ -151,6 +151,15 @@ impl Hull {
             .fold(f32::NEG_INFINITY, f32::max)
     }
 
+    /// How far the farthest vertex lies outside a face's plane (≤ 0 for a convex hull: its
+    /// faces all face away from every vertex).
+    fn fold_m(&self) -> f32 {
+        self.points
+            .iter()
+            .map(|&p| self.distance_outside(p))
+            .fold(f32::NEG_INFINITY, f32::max)
+    }
+
     fn into_trimesh(self) -> TriMesh {
         TriMesh::new(self.points, self.triangles)
     }
@@ -397,6 +406,39 @@ fn grown_to_cover(reduced: Hull, points: &[Vec3]) -> (Hull, f32) {
     }
 }
 
+/// How far outside a face's plane a hull's own vertex may lie before the hull counts as
+/// folded, metres (rounding of a hull's faces in f32).
+const FOLD_TOLERANCE_M: f32 = 1e-4;
+
+/// `hull`, or its points' hull made again when a face of it is folded (a vertex outside the
+/// face's plane: on TUM 2 hulls of 83 had vertices up to 159 mm outside a face, which an engine
+/// takes for a different solid). Made again it is convex by construction; should it still be
+/// folded, its points' bounding box stands in (convex, and it holds them).
+fn unfolded(hull: Hull) -> Hull {
+    let fold = hull.fold_m();
+    if fold <= FOLD_TOLERANCE_M {
+        return hull;
+    }
+    tracing::debug!("a hull was folded by {fold} m; made again");
+    if let Some(again) = Hull::of(&hull.points).filter(|h| h.fold_m() <= FOLD_TOLERANCE_M) {
+        return again;
+    }
+    let (lo, hi) = hull.points.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let corners: Vec<Vec3> = (0..8)
+        .map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            )
+        })
+        .collect();
+    Hull::of(&corners).unwrap_or(hull)
+}
+
 // ---- entry point ----------------------------------------------------------------------------
 
 /// Approximate convex decomposition of a closed, outward mesh (metres) into at most
@@ -454,6 +496,7 @@ pub fn convex_parts_with(
     let mut masses = Vec::with_capacity(hulls.len());
     for hull in hulls {
         let (hull, missed_m) = reduce_hull(hull, config.max_hull_vertices);
+        let hull = unfolded(hull);
         hull_reduction_m = hull_reduction_m.max(missed_m);
         let mesh = hull.into_trimesh();
         masses.push(MassProperties::of_closed_mesh(&mesh)?);
@@ -496,6 +539,23 @@ mod tests {
         assert_eq!(parts.decomposition, Decomposition::SingleHull);
         assert_closed_outward(&parts.hulls[0]);
         assert!((parts.volume_ratio() - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_folded_hull_is_made_again() {
+        let good = Hull::of(&cube(0.2).vertices).expect("a cube's hull");
+        assert!(good.fold_m() <= FOLD_TOLERANCE_M);
+        // One face turned inside out: its far corner lies outside the flipped face's plane.
+        let mut folded = Hull {
+            points: good.points.clone(),
+            triangles: good.triangles.clone(),
+            volume_m3: good.volume_m3,
+        };
+        folded.triangles[0].swap(1, 2);
+        assert!(folded.fold_m() > 0.1, "{}", folded.fold_m());
+        let mended = unfolded(folded);
+        assert!(mended.fold_m() <= FOLD_TOLERANCE_M);
+        assert!((mended.volume_m3 - 0.008).abs() < 1e-6);
     }
 
     #[test]
