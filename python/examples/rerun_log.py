@@ -66,7 +66,11 @@ def log_stream(
     deadline: float | None = None
     last_s = 0.0
     with Subscriber(
-        socket, encoding=encoding, max_rate_hz=max_rate_hz, reconnect=False, timeout_s=10
+        socket,
+        encoding=encoding,
+        max_rate_hz=max_rate_hz,
+        reconnect=False,
+        timeout_s=10,
     ) as subscriber:
         for message in subscriber:
             if isinstance(message, Shape):
@@ -84,7 +88,10 @@ def log_stream(
             elif isinstance(message, Stats):
                 rr.set_time("capture", duration=message.monotonic_ns * 1e-9)
                 rr.log("stats/frames_in", rr.Scalars(float(message.frames_in)))
-                rr.log("stats/frame_to_publish_p99_ms", rr.Scalars(message.frame_to_publish_p99_ms))
+                rr.log(
+                    "stats/frame_to_publish_p99_ms",
+                    rr.Scalars(message.frame_to_publish_p99_ms),
+                )
                 rr.log("stats/bytes_sent", rr.Scalars(float(message.bytes_sent)))
                 counts["stats"] += 1
             if deadline is None and subscriber.scene.complete and counts["stats"]:

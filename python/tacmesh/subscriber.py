@@ -188,7 +188,8 @@ class Mesh(NamedTuple):
 @dataclass(frozen=True, eq=False)
 class SceneObject:
     """One object (or support plane) as the scene holds it: its latest shape, the latest pose
-    for that shape, and its newest collision body if it has one that fits the shape's frame."""
+    for that shape, and its newest collision body if it has one that fits the shape's frame.
+    """
 
     shape: Shape
     pose: Pose
@@ -662,7 +663,9 @@ class Subscriber:
         """The one warning of a wait for the daemon: none there yet, or gone."""
         if self.connections > 0:
             log.warning(
-                "tacmesh: the daemon at %s went away (%s); reconnecting", self.path, self._lost
+                "tacmesh: the daemon at %s went away (%s); reconnecting",
+                self.path,
+                self._lost,
             )
         elif no_daemon:
             what = "no such socket" if isinstance(error, FileNotFoundError) else "nobody listens"

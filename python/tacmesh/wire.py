@@ -292,7 +292,8 @@ DEFAULT_OPTIONS = Subscribe()
 @dataclass(frozen=True)
 class SubscribeV1:
     """Client → server (0x80): version 1's empty Subscribe. A server of version 2 or later
-    refuses it with a Goodbye; this client never sends it (the encoder is here for tests)."""
+    refuses it with a Goodbye; this client never sends it (the encoder is here for tests).
+    """
 
 
 @dataclass(frozen=True)
@@ -454,7 +455,9 @@ def inertia_matrix(
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], np.float32)
 
 
-def inertia_terms(inertia: npt.ArrayLike) -> tuple[float, float, float, float, float, float]:
+def inertia_terms(
+    inertia: npt.ArrayLike,
+) -> tuple[float, float, float, float, float, float]:
     """The six entries of a ``(3, 3)`` inertia tensor in the wire's order: ``ixx``, ``iyy``,
     ``izz``, ``ixy``, ``ixz``, ``iyz`` (its diagonal, then its upper triangle)."""
     m = np.asarray(inertia, dtype=np.float64).reshape(3, 3)
@@ -1347,7 +1350,10 @@ def _shape_payload(shape: Shape, validate: bool) -> bytes:
 
 
 def _check_body(
-    body: Body, what: str, vertices: npt.NDArray[np.float32], triangles: npt.NDArray[Any]
+    body: Body,
+    what: str,
+    vertices: npt.NDArray[np.float32],
+    triangles: npt.NDArray[Any],
 ) -> None:
     """What a receiver checks of a Body's fixed fields and proxy mesh, and that its inertia is
     a symmetric 3 × 3 tensor (the wire carries only its upper triangle)."""
