@@ -23,6 +23,8 @@ pub const OVERLAP_TOLERANCE_M: f32 = 0.005;
 struct Shapes {
     member: Member,
     dynamic: bool,
+    /// A body's centre of mass in the world.
+    centre_of_mass: Option<Vec3>,
     parts: Vec<(Pose, Box<dyn Shape>)>,
     centre: Vec3,
     radius: f32,
@@ -50,6 +52,10 @@ fn body_shapes(scene: &Scene) -> impl Iterator<Item = Shapes> + '_ {
         Shapes {
             member: Member::Body(k),
             dynamic: body.motion == Motion::Dynamic,
+            centre_of_mass: Some(
+                body.world_from_body.rotation * body.mass.centre_of_mass
+                    + body.world_from_body.translation_m,
+            ),
             parts,
             centre,
             radius,
@@ -65,11 +71,21 @@ fn support_shapes(scene: &Scene) -> impl Iterator<Item = Shapes> + '_ {
         Shapes {
             member: Member::Support(k),
             dynamic: false,
+            centre_of_mass: None,
             parts: vec![(pose, Box::new(Cuboid::new(half)) as Box<dyn Shape>)],
             centre,
             radius: half.length(),
         }
     })
+}
+
+/// Whether `centre` is above `support`'s top and over its slab.
+fn stands_over(support: &crate::scene::SceneSupport, centre: Vec3) -> bool {
+    let rotation = support.rotation();
+    let d = centre - support.top_centre_in_world;
+    d.dot(support.normal_in_world.normalize_or_zero()) > 0.0
+        && d.dot(rotation * Vec3::X).abs() <= support.half_size_m.x
+        && d.dot(rotation * Vec3::Y).abs() <= support.half_size_m.y
 }
 
 /// A sphere around `points` (their centroid and farthest distance): loose, for skipping
@@ -169,6 +185,14 @@ pub fn starting_overlaps(scene: &Scene, tolerance_m: f32) -> Vec<Exclusion> {
         for b in &members[i + 1..] {
             if !(a.dynamic || b.dynamic) {
                 continue;
+            }
+            // A body standing over a support always collides with it: kept from it, it would
+            // fall through what holds it up (one reaching a little into it is lifted instead,
+            // see `lift_onto_supports`).
+            if let (Some(centre), Member::Support(k)) = (a.centre_of_mass, b.member) {
+                if stands_over(&scene.supports[k], centre) {
+                    continue;
+                }
             }
             let depth_m = depth(a, b);
             if depth_m > tolerance_m {
