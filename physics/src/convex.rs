@@ -373,7 +373,15 @@ fn reduce_hull(hull: Hull, max_vertices: usize) -> (Hull, f32) {
 /// hulls cover the proxy; a hull reduced inside its full one once left 6.5 mm of a proxy
 /// uncovered). Returns it and how far its farthest vertex moved out.
 fn grown_to_cover(reduced: Hull, points: &[Vec3]) -> (Hull, f32) {
-    let centre = reduced.points.iter().copied().sum::<Vec3>() / reduced.points.len() as f32;
+    // About the full hull's points' mean, when it is inside (it is for any hull not much
+    // thinner than its reduction error): the reduced vertices are picked unevenly, and grown
+    // about their own mean a ball's hull came out lopsided and rolled away.
+    let full_mean = points.iter().copied().sum::<Vec3>() / points.len().max(1) as f32;
+    let centre = if reduced.distance_outside(full_mean) < 0.0 {
+        full_mean
+    } else {
+        reduced.points.iter().copied().sum::<Vec3>() / reduced.points.len() as f32
+    };
     // Each face's plane n·(x − c) = d, d > 0 for a centroid inside: a point p is inside the
     // hull grown by s when n·(p − c) ≤ s·d for every face.
     let mut scale = 1.0f32;

@@ -61,8 +61,9 @@ def test_cube_rests_and_sphere_lands(
     assert np.dot(cube, up) == pytest.approx(CUBE_HALF_M, abs=0.002)
     assert np.linalg.norm(cube - cube_start) < 0.003
     sphere = body_position(model, data, "sphere")
-    # Landed from 0.2 m on its inscribed hull: on the plane, not through it.
-    assert SPHERE_RADIUS_M - 0.004 < np.dot(sphere, up) < SPHERE_RADIUS_M + 0.002
+    # Landed from 0.2 m on its hull (of at most 64 of its 114 vertices, grown to cover them
+    # all: 3 mm beyond the sphere's own mesh): on the plane, not through it.
+    assert SPHERE_RADIUS_M - 0.001 < np.dot(sphere, up) < SPHERE_RADIUS_M + 0.005
     # Nothing is still moving fast (the sphere hit the plane at about 1.7 m/s).
     assert np.max(np.abs(data.qvel)) < 0.2
     # The desk top is a finite slab 0.4 m up: the cube on it rests there, and the cube on the
