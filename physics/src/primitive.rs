@@ -14,6 +14,7 @@
 //! and the footprint's smallest rectangle ([`crate::min_area_rectangle`]).
 
 use glam::{DMat3, DVec3, Mat3, Quat, Vec2, Vec3};
+use parry3d::shape::{Ball, Cuboid, Cylinder};
 use tacmesh_source::TriMesh;
 
 use crate::mass::MassProperties;
@@ -122,27 +123,31 @@ impl Primitive {
     /// of the radius).
     pub fn mesh_with(&self, around: u32, rings: u32) -> TriMesh {
         let (around, rings) = (around.max(3), rings.max(2));
-        let local = match self.shape {
+        // Parry's tessellations (its cylinder stands along y: turned onto z here).
+        let (vertices, triangles, turn) = match self.shape {
             PrimitiveShape::Box { half_m } => {
-                let mut mesh = box_mesh();
-                for v in &mut mesh.vertices {
-                    *v *= half_m;
-                }
-                mesh
+                let (v, t) = Cuboid::new(half_m).to_trimesh();
+                (v, t, Quat::IDENTITY)
             }
             PrimitiveShape::Cylinder {
                 radius_m,
                 half_height_m,
-            } => cylinder_mesh(around, radius_m, half_height_m),
-            PrimitiveShape::Sphere { radius_m } => sphere_mesh(2 * rings, rings, radius_m),
+            } => {
+                let (v, t) = Cylinder::new(half_height_m, radius_m).to_trimesh(around);
+                (v, t, Quat::from_rotation_x(std::f32::consts::FRAC_PI_2))
+            }
+            PrimitiveShape::Sphere { radius_m } => {
+                let (v, t) = Ball::new(radius_m).to_trimesh(2 * rings, rings);
+                (v, t, Quat::IDENTITY)
+            }
         };
+        let to_object = self.rotation * turn;
         TriMesh::new(
-            local
-                .vertices
+            vertices
                 .iter()
-                .map(|&v| self.rotation * v + self.centre)
+                .map(|&v| to_object * v + self.centre)
                 .collect(),
-            local.triangles,
+            triangles,
         )
     }
 
@@ -160,80 +165,6 @@ impl Primitive {
             ],
         }
     }
-}
-
-/// A cube from −1 to 1, outward.
-fn box_mesh() -> TriMesh {
-    let vertices = (0..8u32)
-        .map(|i| {
-            let pick = |bit: u32| if i & (1 << bit) != 0 { 1.0 } else { -1.0 };
-            Vec3::new(pick(0), pick(1), pick(2))
-        })
-        .collect();
-    // Counter-clockwise seen from outside: -X, +X, -Y, +Y, -Z, +Z.
-    const FACES: [[u32; 4]; 6] = [
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-    ];
-    let triangles = FACES
-        .iter()
-        .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
-        .collect();
-    TriMesh::new(vertices, triangles)
-}
-
-/// A cylinder about z, `sides` around, outward.
-fn cylinder_mesh(sides: u32, radius: f32, half_height: f32) -> TriMesh {
-    let mut vertices = Vec::with_capacity(2 * sides as usize + 2);
-    for k in 0..sides {
-        let a = std::f32::consts::TAU * k as f32 / sides as f32;
-        let (x, y) = (radius * a.cos(), radius * a.sin());
-        vertices.push(Vec3::new(x, y, -half_height));
-        vertices.push(Vec3::new(x, y, half_height));
-    }
-    let (bottom, top) = (2 * sides, 2 * sides + 1);
-    vertices.push(Vec3::new(0.0, 0.0, -half_height));
-    vertices.push(Vec3::new(0.0, 0.0, half_height));
-    let mut triangles = Vec::with_capacity(4 * sides as usize);
-    for k in 0..sides {
-        let (b0, t0) = (2 * k, 2 * k + 1);
-        let (b1, t1) = (2 * ((k + 1) % sides), 2 * ((k + 1) % sides) + 1);
-        triangles.extend([[b0, b1, t1], [b0, t1, t0], [bottom, b1, b0], [top, t0, t1]]);
-    }
-    TriMesh::new(vertices, triangles)
-}
-
-/// A UV sphere, `around` × `rings`, outward.
-fn sphere_mesh(around: u32, rings: u32, radius: f32) -> TriMesh {
-    let mut vertices = vec![Vec3::new(0.0, 0.0, -radius)];
-    for ring in 1..rings {
-        let polar = std::f32::consts::PI * ring as f32 / rings as f32;
-        let (z, r) = (-radius * polar.cos(), radius * polar.sin());
-        for k in 0..around {
-            let a = std::f32::consts::TAU * k as f32 / around as f32;
-            vertices.push(Vec3::new(r * a.cos(), r * a.sin(), z));
-        }
-    }
-    vertices.push(Vec3::new(0.0, 0.0, radius));
-    let north = vertices.len() as u32 - 1;
-    let at = |ring: u32, k: u32| 1 + (ring - 1) * around + k % around;
-    let mut triangles = Vec::new();
-    for k in 0..around {
-        triangles.push([0, at(1, k + 1), at(1, k)]);
-        triangles.push([north, at(rings - 1, k), at(rings - 1, k + 1)]);
-    }
-    for ring in 1..rings - 1 {
-        for k in 0..around {
-            let (a, b) = (at(ring, k), at(ring, k + 1));
-            let (c, d) = (at(ring + 1, k), at(ring + 1, k + 1));
-            triangles.extend([[a, b, d], [a, d, c]]);
-        }
-    }
-    TriMesh::new(vertices, triangles)
 }
 
 /// Points to judge a fit by: a mesh's vertices, edge midpoints and triangle centroids (a
