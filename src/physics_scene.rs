@@ -19,7 +19,7 @@
 
 use std::collections::HashMap;
 
-use glam::{Affine3A, Vec3};
+use glam::Vec3;
 use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
 use tacmesh_physics::scene::{
     Exclusion, Member, Motion, Scene as SimScene, SceneBody, SceneSupport, WorldFromBody,
@@ -52,8 +52,9 @@ struct Collision {
     body_version: Option<u64>,
     /// The parts and their mass, or why there are none.
     parts: Result<(Vec<TriMesh>, MassProperties, ProxyKind), String>,
-    /// The primitive the shape is, if one explains it (then the body is that primitive).
-    primitive: Option<Primitive>,
+    /// The primitive the shape is, if one explains it (then the body is that primitive), with
+    /// its tessellation and mass properties, made once per shape.
+    primitive: Option<(Primitive, Vec<TriMesh>, MassProperties)>,
 }
 
 /// Collision parts of a subscriber's objects, kept from update to update.
@@ -143,12 +144,17 @@ impl PhysicsScene {
         for object in objects {
             let id = object.object_id();
             let world_from_object = object.pose.world_from_object();
+            // The support it stands on (an index into `supports`), and that plane in its frame:
+            // looked up once, from its mesh in the world.
+            let standing_on =
+                tacmesh_physics::support_under(&supports, &object.world_mesh().vertices)
+                    .and_then(|s| supports.iter().position(|t| t.object_id == s.object_id));
+            let support = standing_on.map(|k| supports[k].in_frame(world_from_object));
             let body_version = object.body.as_ref().map(|b| b.shape_version);
             let stale = self.collisions.get(&id).is_none_or(|c| {
                 c.shape_version != object.shape.version() || c.body_version != body_version
             });
             if stale {
-                let support = support_under(&supports, object, world_from_object);
                 let points = surface_points(&object.shape.mesh);
                 let bound_m = object.shape.report.max_residual_m + PRIMITIVE_NOISE_M;
                 // Resting on its support; a closed shape on nothing known, in any orientation.
@@ -161,7 +167,6 @@ impl PhysicsScene {
                     Some(body) => Ok(published_parts(body)),
                     None => {
                         decomposed += 1;
-                        let support = support_under(&supports, object, world_from_object);
                         collision_parts(object, support)
                     }
                 };
@@ -171,7 +176,7 @@ impl PhysicsScene {
                         shape_version: object.shape.version(),
                         body_version,
                         parts,
-                        primitive,
+                        primitive: primitive.map(|p| (p, vec![p.mesh()], p.mass())),
                     },
                 );
             }
@@ -180,22 +185,17 @@ impl PhysicsScene {
             }
             let collision = &self.collisions[&id];
             // A primitive is the object whole: its mass, and the engine's exact collisions.
-            let as_primitive = collision.primitive.map(|p| (vec![p.mesh()], p.mass()));
-            let parts = match (&collision.parts, &as_primitive) {
-                (_, Some((mesh, mass))) => Ok((mesh, mass)),
+            let parts = match (&collision.parts, &collision.primitive) {
+                (_, Some((_, mesh, mass))) => Ok((mesh, mass)),
                 (Ok((parts, mass, _)), None) => Ok((parts, mass)),
                 (Err(why), None) => Err(why),
             };
             match parts {
                 Ok((parts, mass)) => {
-                    let support = support_under(&supports, object, world_from_object);
                     // What stands on a support is evidence of it: the table goes on under the
                     // object, where the camera could not see it. Its foot joins the support's
                     // outline, so that the slab reaches under it.
-                    if let Some(k) =
-                        tacmesh_physics::support_under(&supports, &object.world_mesh().vertices)
-                            .and_then(|s| supports.iter().position(|t| t.object_id == s.object_id))
-                    {
+                    if let Some(k) = standing_on {
                         let on = &supports[k];
                         outlines[k].extend(
                             parts
@@ -240,7 +240,7 @@ impl PhysicsScene {
                         },
                         visual: object.shape.mesh.clone(),
                         convex_parts: parts.clone(),
-                        primitive: collision.primitive,
+                        primitive: collision.primitive.as_ref().map(|(p, _, _)| *p),
                         mass: plausible.unwrap_or(*mass),
                         motion,
                     })
@@ -303,16 +303,6 @@ impl PhysicsScene {
             primitives,
         }
     }
-}
-
-/// The support an object stands on, in the object's frame.
-fn support_under(
-    supports: &[WorldSupport],
-    object: &SceneObject,
-    world_from_object: Affine3A,
-) -> Option<SupportPlane> {
-    tacmesh_physics::support_under(supports, &object.world_mesh().vertices)
-        .map(|s| s.in_frame(world_from_object))
 }
 
 /// The convex parts and mass properties of a published Body.
