@@ -207,10 +207,7 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
 
     let mut contact = String::new();
     for exclusion in &scene.exclusions {
-        let name = |m: Member| match m {
-            Member::Support(k) => &support_names[k],
-            Member::Body(k) => &body_names[k],
-        };
+        let name = |m: Member| m.of(&support_names, &body_names);
         let _ = writeln!(
             contact,
             r#"    <exclude body1="{}" body2="{}"/> <!-- {} mm inside each other at the start -->"#,

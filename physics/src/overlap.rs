@@ -81,11 +81,7 @@ fn support_shapes(scene: &Scene) -> impl Iterator<Item = Shapes> + '_ {
 
 /// Whether `centre` is above `support`'s top and over its slab.
 fn stands_over(support: &crate::scene::SceneSupport, centre: Vec3) -> bool {
-    let rotation = support.rotation();
-    let d = centre - support.top_centre_in_world;
-    d.dot(support.normal_in_world.normalize_or_zero()) > 0.0
-        && d.dot(rotation * Vec3::X).abs() <= support.half_size_m.x
-        && d.dot(rotation * Vec3::Y).abs() <= support.half_size_m.y
+    support.height(centre) > 0.0 && support.over(centre)
 }
 
 /// A sphere around `points` (their centroid and farthest distance): loose, for skipping
@@ -148,20 +144,13 @@ pub fn lift_onto_supports(
         let mut best: Option<(usize, f32, Vec3)> = None;
         for (j, support) in scene.supports.iter().enumerate() {
             let normal = support.normal_in_world.normalize_or_zero();
-            let rotation = support.rotation();
-            let (x, y) = (rotation * Vec3::X, rotation * Vec3::Y);
-            let over = |p: Vec3| {
-                let d = p - support.top_centre_in_world;
-                d.dot(x).abs() <= support.half_size_m.x && d.dot(y).abs() <= support.half_size_m.y
-            };
-            // It stands over this support: its centre of mass above the top and over the slab.
-            if normal.dot(centre - support.top_centre_in_world) <= 0.0 || !over(centre) {
+            if !stands_over(support, centre) {
                 continue;
             }
             let depth = vertices
                 .iter()
-                .filter(|&&p| over(p))
-                .map(|&p| -normal.dot(p - support.top_centre_in_world))
+                .filter(|&&p| support.over(p))
+                .map(|&p| -support.height(p))
                 .fold(0.0f32, f32::max);
             if depth > tolerance_m && depth <= max_m && best.is_none_or(|b| depth > b.1) {
                 best = Some((j, depth, normal));

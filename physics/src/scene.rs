@@ -128,6 +128,22 @@ impl SceneSupport {
         self.top_centre_in_world - self.normal_in_world * (0.5 * self.thickness_m)
     }
 
+    /// Height of `p` above the top face, along the normal (negative under it).
+    pub fn height(&self, p: Vec3) -> f32 {
+        self.normal_in_world
+            .normalize_or_zero()
+            .dot(p - self.top_centre_in_world)
+    }
+
+    /// Whether `p` lies over (or under) the top face: within its rectangle seen along the
+    /// normal.
+    pub fn over(&self, p: Vec3) -> bool {
+        let rotation = self.rotation();
+        let d = p - self.top_centre_in_world;
+        d.dot(rotation * Vec3::X).abs() <= self.half_size_m.x
+            && d.dot(rotation * Vec3::Y).abs() <= self.half_size_m.y
+    }
+
     /// Half the box's sides in its own frame (x, y along the top face, z through it).
     pub fn box_half_size_m(&self) -> Vec3 {
         Vec3::new(
@@ -144,6 +160,16 @@ impl SceneSupport {
 pub enum Member {
     Support(usize),
     Body(usize),
+}
+
+impl Member {
+    /// This member's entry in one list per kind (the names a writer gave them).
+    pub(crate) fn of<'a, T>(self, supports: &'a [T], bodies: &'a [T]) -> &'a T {
+        match self {
+            Member::Support(k) => &supports[k],
+            Member::Body(k) => &bodies[k],
+        }
+    }
 }
 
 /// Two members that start inside each other by `depth_m`: they do not collide with each other

@@ -222,10 +222,7 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
     };
     let mut excluded = String::new();
     for exclusion in &scene.exclusions {
-        let name = |m: Member| match m {
-            Member::Support(k) => &support_names[k],
-            Member::Body(k) => &body_names[k],
-        };
+        let name = |m: Member| m.of(&support_names, &body_names);
         let _ = write!(
             excluded,
             "\n       {} and {} ({} mm)",

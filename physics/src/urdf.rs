@@ -199,10 +199,7 @@ pub fn urdf_documents(scene: &Scene, config: &UrdfConfig) -> Result<UrdfDocument
         ));
     }
 
-    let name = |m: Member| match m {
-        Member::Support(k) => &support_names[k],
-        Member::Body(k) => &body_names[k],
-    };
+    let name = |m: Member| m.of(&support_names, &body_names);
     let pairs: Vec<String> = scene
         .exclusions
         .iter()
