@@ -81,6 +81,30 @@ def mass(body: int, client: int) -> float:
     return value
 
 
+def assert_weighs_as_its_mjcf(objects: dict[str, int], scene_xml: Path, client: int) -> None:
+    """Every object weighs what the MuJoCo scene written beside it says (the same parts, the
+    same mass properties), when MuJoCo is here to read it."""
+    if importlib.util.find_spec("mujoco") is None:
+        return
+    mujoco: Any = importlib.import_module("mujoco")
+    model: Any = mujoco.MjModel.from_xml_path(str(scene_xml))
+    for name, body in objects.items():
+        mj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        assert mj_body >= 0, f"{name} is not in the MuJoCo scene"
+        assert mass(body, client) == pytest.approx(model.body_mass[mj_body], rel=1e-5), name
+
+
+def assert_at_rest(objects: dict[str, int], client: int, seconds: float) -> None:
+    """Stepped for `seconds`, no object moves 1 cm."""
+    start = {name: position(body, client) for name, body in objects.items()}
+    step(client, seconds)
+    moved = {
+        name: float(np.linalg.norm(position(body, client) - start[name]))
+        for name, body in objects.items()
+    }
+    assert all(distance < 0.01 for distance in moved.values()), moved
+
+
 def step(client: int, seconds: float) -> None:
     for _ in range(round(seconds / STEP_S)):
         pybullet.stepSimulation(physicsClientId=client)
@@ -161,15 +185,7 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
     assert len(objects) >= 3, done.stdout
     assert [name for name in bodies if name.startswith("plane-")], sorted(bodies)
 
-    # Every object weighs what the MuJoCo scene written beside it says (the same parts, the
-    # same mass properties), when MuJoCo is here to read it.
-    if importlib.util.find_spec("mujoco") is not None:
-        mujoco: Any = importlib.import_module("mujoco")
-        model: Any = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))
-        for name, body in objects.items():
-            mj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
-            assert mj_body >= 0, f"{name} is not in the MuJoCo scene"
-            assert mass(body, client) == pytest.approx(model.body_mass[mj_body], rel=1e-5), name
+    assert_weighs_as_its_mjcf(objects, tmp_path / "scene.xml", client)
 
     # Bodies collide with each other and the table, but for the pairs the file's comment says
     # start inside each other (their proxies may overlap in the space no sensor saw).
@@ -177,13 +193,7 @@ def test_the_subscribers_world_of_the_demo_rests_and_weighs_as_its_mjcf(
         pybullet.setCollisionFilterPair(
             bodies[first], bodies[second], -1, -1, 0, physicsClientId=client
         )
-    start = {name: position(body, client) for name, body in objects.items()}
-    step(client, 4.0)
-    moved = {
-        name: float(np.linalg.norm(position(body, client) - start[name]))
-        for name, body in objects.items()
-    }
-    assert all(distance < 0.01 for distance in moved.values()), moved
+    assert_at_rest(objects, client, 4.0)
     for body in objects.values():
         linear, _ = pybullet.getBaseVelocity(body, physicsClientId=client)
         assert np.linalg.norm(linear) < 0.1

@@ -7,18 +7,15 @@ Skipped, with the reason, when pybullet is not installed.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import json
 import subprocess
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 
 from test_daemon import Daemon, daemon, daemon_binary  # noqa: F401  (the fixture)
-from test_sdf import client, mass, position, step  # noqa: F401  (the fixture)
+from test_sdf import assert_at_rest, assert_weighs_as_its_mjcf, client  # noqa: F401  (the fixture)
 
 pybullet = pytest.importorskip("pybullet", reason="the pybullet package is not installed")
 
@@ -68,18 +65,5 @@ def test_the_subscribers_urdf_of_the_demo_rests_and_weighs_as_its_mjcf(
     assert len(objects) >= 3, done.stdout
     assert [name for name in bodies if name.startswith("plane-")], sorted(bodies)
 
-    if importlib.util.find_spec("mujoco") is not None:
-        mujoco: Any = importlib.import_module("mujoco")
-        model: Any = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))
-        for name, body in objects.items():
-            mj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
-            assert mj_body >= 0, f"{name} is not in the MuJoCo scene"
-            assert mass(body, client) == pytest.approx(model.body_mass[mj_body], rel=1e-5), name
-
-    start = {name: position(body, client) for name, body in objects.items()}
-    step(client, 2.0)
-    moved = {
-        name: float(np.linalg.norm(position(body, client) - start[name]))
-        for name, body in objects.items()
-    }
-    assert all(distance < 0.01 for distance in moved.values()), moved
+    assert_weighs_as_its_mjcf(objects, tmp_path / "scene.xml", client)
+    assert_at_rest(objects, client, 2.0)
