@@ -220,7 +220,7 @@ pub fn urdf_documents(scene: &Scene, config: &UrdfConfig) -> Result<UrdfDocument
 }
 
 /// Writes `dir/urdf/*.urdf`, `dir/urdf/scene.json` and `dir/meshes/*.stl` for `scene`: the
-/// meshes first, then the robots, the index last, so a reader that sees the new index finds
+/// robots, then the meshes, the index last, so a reader that sees the new index finds
 /// everything it names.
 pub fn write_urdf(
     dir: &Path,
@@ -233,16 +233,12 @@ pub fn write_urdf(
         path: urdf_dir.clone(),
         source,
     })?;
+    // The robots here; the meshes and then the index with write_scene_files.
     let mut robot_files = Vec::with_capacity(documents.robots.len());
-    // The meshes go with write_scene_files; the robots before the index it writes last.
-    let mut staged = Vec::new();
     for (file, text) in &documents.robots {
         let path = urdf_dir.join(file);
-        staged.push((path.clone(), text.clone()));
+        write_whole(&path, text.as_bytes())?;
         robot_files.push(path);
-    }
-    for (path, text) in &staged {
-        write_whole(path, text.as_bytes())?;
     }
     let index_name = format!("{URDF_FOLDER}/scene.json");
     let written = write_scene_files(dir, &index_name, &documents.index, &documents.meshes)?;
