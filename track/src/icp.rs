@@ -85,15 +85,6 @@ pub struct UnseenTurns {
 }
 
 impl UnseenTurns {
-    /// How many there are (0 for a surface that fixes every turn).
-    pub fn len(&self) -> usize {
-        self.count
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.count == 0
-    }
-
     /// `step` without its turn about the axis, when there is exactly one (a surface of
     /// revolution: a cone, a cylinder, a torus, a bowl). `step` maps object coordinates at one
     /// pose to those at another (`object_from_world' = step · object_from_world`); the axis
