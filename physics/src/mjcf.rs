@@ -175,6 +175,10 @@ pub fn mjcf_document(scene: &Scene, config: &MjcfConfig) -> Result<MjcfDocument,
                     half_height_m,
                 } => ("cylinder", vec![radius_m, half_height_m]),
                 PrimitiveShape::Sphere { radius_m } => ("sphere", vec![radius_m]),
+                PrimitiveShape::Capsule {
+                    radius_m,
+                    half_height_m,
+                } => ("capsule", vec![radius_m, half_height_m]),
             };
             let _ = writeln!(
                 world,
@@ -425,6 +429,21 @@ mod tests {
                 .matches(r#"class="collision" type="mesh""#)
                 .count(),
             1
+        );
+        // A capsule is MuJoCo's own capsule too: radius, then half the axis.
+        let capsule = crate::primitive::Primitive {
+            shape: PrimitiveShape::Capsule {
+                radius_m: 0.03,
+                half_height_m: 0.07,
+            },
+            ..primitive
+        };
+        scene.bodies[0].primitive = Some(capsule);
+        scene.bodies[0].mass = capsule.mass();
+        let xml = mjcf_document(&scene, &MjcfConfig::default()).unwrap().xml;
+        assert!(
+            xml.contains(r#"class="collision" type="capsule" size="0.03 0.07""#),
+            "{xml}"
         );
     }
 

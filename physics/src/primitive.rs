@@ -1,4 +1,5 @@
-//! Primitives where an object is one: a box, a cylinder (standing or lying) or a sphere fitted
+//! Primitives where an object is one: a box, a cylinder or a capsule (standing or lying) or a
+//! sphere fitted
 //! to what was seen of it. A physics engine collides primitives exactly and cheaply, with true
 //! contact normals, and their mass properties are those of the whole object, where a one-view
 //! shell's shadow volume weighs two to twenty times the truth.
@@ -14,19 +15,32 @@
 //! and the footprint's smallest rectangle ([`crate::min_area_rectangle`]).
 
 use glam::{DMat3, DVec3, Mat3, Quat, Vec2, Vec3};
-use parry3d::shape::{Ball, Cuboid, Cylinder};
+use parry3d::shape::{Ball, Capsule, Cuboid, Cylinder};
 use tacmesh_source::TriMesh;
 
 use crate::mass::MassProperties;
 use crate::proxy::SupportPlane;
 
 /// What kind of primitive, with its sizes (in its own frame: a box's sides along x, y, z; a
-/// cylinder's axis along z, centred on its origin; a sphere about its origin).
+/// cylinder's and a capsule's axis along z, centred on its origin; a sphere about its origin).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PrimitiveShape {
-    Box { half_m: Vec3 },
-    Cylinder { radius_m: f32, half_height_m: f32 },
-    Sphere { radius_m: f32 },
+    Box {
+        half_m: Vec3,
+    },
+    Cylinder {
+        radius_m: f32,
+        half_height_m: f32,
+    },
+    Sphere {
+        radius_m: f32,
+    },
+    /// The segment from −`half_height_m` to `half_height_m` on z, grown by `radius_m`
+    /// (MuJoCo's and Bullet's capsule).
+    Capsule {
+        radius_m: f32,
+        half_height_m: f32,
+    },
 }
 
 /// A primitive placed in an object's frame.
@@ -41,12 +55,30 @@ pub struct Primitive {
 }
 
 impl PrimitiveShape {
-    /// A short name: `box`, `cylinder`, `sphere`.
+    /// A short name: `box`, `cylinder`, `sphere`, `capsule`.
     pub fn name(&self) -> &'static str {
         match self {
             PrimitiveShape::Box { .. } => "box",
             PrimitiveShape::Cylinder { .. } => "cylinder",
             PrimitiveShape::Sphere { .. } => "sphere",
+            PrimitiveShape::Capsule { .. } => "capsule",
+        }
+    }
+
+    /// How far the shape reaches along the unit direction `n` (its own frame) from its centre:
+    /// its support function.
+    pub fn reach(&self, n: Vec3) -> f32 {
+        match *self {
+            PrimitiveShape::Sphere { radius_m } => radius_m,
+            PrimitiveShape::Box { half_m } => (n.abs() * half_m).element_sum(),
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            } => n.z.abs() * half_height_m + radius_m * Vec2::new(n.x, n.y).length(),
+            PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => n.z.abs() * half_height_m + radius_m,
         }
     }
 
@@ -68,6 +100,13 @@ impl PrimitiveShape {
                 );
                 d.max(Vec2::ZERO).length() + d.max_element().min(0.0)
             }
+            PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => {
+                let on_axis = Vec3::new(0.0, 0.0, q.z.clamp(-half_height_m, half_height_m));
+                q.distance(on_axis) - radius_m
+            }
         }
     }
 
@@ -80,6 +119,10 @@ impl PrimitiveShape {
                 radius_m: r,
                 half_height_m: h,
             } => std::f32::consts::PI * r * r * 2.0 * h,
+            PrimitiveShape::Capsule {
+                radius_m: r,
+                half_height_m: h,
+            } => std::f32::consts::PI * r * r * (2.0 * h + 4.0 / 3.0 * r),
         }
     }
 
@@ -99,6 +142,19 @@ impl PrimitiveShape {
             } => {
                 let across = v * (3.0 * r * r + 4.0 * h * h) / 12.0;
                 Vec3::new(across, across, 0.5 * v * r * r)
+            }
+            PrimitiveShape::Capsule {
+                radius_m: r,
+                half_height_m: h,
+            } => {
+                // The cylinder between the caps, and the two hemispheres: each of half the
+                // ball's volume, its own moment across 83/320 m r² about its centroid, 3r/8
+                // from its flat face (at ±h).
+                let cylinder = std::f32::consts::PI * r * r * 2.0 * h;
+                let ball = 4.0 / 3.0 * std::f32::consts::PI * r.powi(3);
+                let across = cylinder * (r * r / 4.0 + h * h / 3.0)
+                    + ball * (83.0 / 320.0 * r * r + (h + 3.0 * r / 8.0).powi(2));
+                Vec3::new(across, across, cylinder * r * r / 2.0 + ball * 0.4 * r * r)
             }
         }
     }
@@ -140,6 +196,13 @@ impl Primitive {
                 let (v, t) = Ball::new(radius_m).to_trimesh(2 * rings, rings);
                 (v, t, Quat::IDENTITY)
             }
+            PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => {
+                let (v, t) = Capsule::new_z(half_height_m, radius_m).to_trimesh(around, rings);
+                (v, t, Quat::IDENTITY)
+            }
         };
         let to_object = self.rotation * turn;
         TriMesh::new(
@@ -149,6 +212,55 @@ impl Primitive {
                 .collect(),
             triangles,
         )
+    }
+
+    /// A convex tessellation that contains the primitive (as [`Primitive::mesh`], its round
+    /// sides pushed out until every face's plane is at or beyond the true surface): the hull
+    /// an engine without the primitive collides, conservative as the protocol's hulls are.
+    pub fn covering_mesh(&self) -> TriMesh {
+        let round = |scale: f32| match self.shape {
+            PrimitiveShape::Box { .. } => self.shape,
+            PrimitiveShape::Sphere { radius_m } => PrimitiveShape::Sphere {
+                radius_m: radius_m * scale,
+            },
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            } => PrimitiveShape::Cylinder {
+                radius_m: radius_m * scale,
+                half_height_m,
+            },
+            PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => PrimitiveShape::Capsule {
+                radius_m: radius_m * scale,
+                half_height_m,
+            },
+        };
+        let placed = |shape: PrimitiveShape| Primitive { shape, ..*self };
+        // The faces' planes are inside the round surface by 1 − cos of half a facet's angle;
+        // a few rounds of growing by the worst face's shortfall settle it.
+        let mut scale = 1.0f32;
+        for _ in 0..6 {
+            let mesh = placed(round(scale)).mesh();
+            let shortfall = mesh
+                .triangles
+                .iter()
+                .filter_map(|t| {
+                    let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+                    let n = (b - a).cross(c - a).try_normalize()?;
+                    let offset = n.dot(a - self.centre);
+                    let needed = self.shape.reach(self.rotation.inverse() * n);
+                    (offset > 0.0).then_some(needed / offset)
+                })
+                .fold(1.0f32, f32::max);
+            if shortfall <= 1.0 + 1e-6 {
+                return mesh;
+            }
+            scale *= shortfall * (1.0 + 1e-6);
+        }
+        placed(round(scale)).mesh()
     }
 
     /// Mass properties at unit density, in the object's frame.
@@ -371,6 +483,41 @@ fn refine<const N: usize>(
     Some(x)
 }
 
+/// The shortest axis segment a capsule has, over its radius.
+const MIN_CAPSULE_AXIS_OVER_RADIUS: f32 = 0.5;
+
+/// The round primitives with an axis: a cylinder, or a capsule (a cylinder with a
+/// hemisphere on each end), fitted the same ways.
+#[derive(Debug, Clone, Copy)]
+enum Round {
+    Cylinder,
+    Capsule,
+}
+
+impl Round {
+    /// The shape of this kind with `radius_m` and half its whole length along its axis, if
+    /// both are positive (and a capsule is longer than its ball).
+    fn shape(self, radius_m: f32, half_length_m: f32) -> Option<PrimitiveShape> {
+        if !(radius_m > 0.0 && half_length_m > 0.0) {
+            return None;
+        }
+        match self {
+            Round::Cylinder => Some(PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m: half_length_m,
+            }),
+            // An axis shorter than half the radius is a ball to within a quarter of it: a
+            // sphere says so more simply (and a ball's fit once drifted to such a capsule).
+            Round::Capsule => (half_length_m - radius_m
+                >= MIN_CAPSULE_AXIS_OVER_RADIUS * 0.5 * radius_m)
+                .then_some(PrimitiveShape::Capsule {
+                    radius_m,
+                    half_height_m: half_length_m - radius_m,
+                }),
+        }
+    }
+}
+
 /// A sphere resting on the support (or free, without one).
 fn sphere(points: &[Vec3], support: Option<SupportPlane>) -> Option<Primitive> {
     let (centre, radius) = fit_sphere(points)?;
@@ -431,9 +578,14 @@ fn standing_box(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<
     make(&best)
 }
 
-/// A cylinder standing on the support: its wall a circle fitted to the points below its top,
-/// its top the highest points. Needs its wall seen.
-fn standing_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
+/// A cylinder or a capsule standing on the support: its wall a circle fitted to the points
+/// below its top, its top the highest points. Needs its wall seen.
+fn standing_round(
+    points: &[Vec3],
+    support: SupportPlane,
+    bound_m: f32,
+    kind: Round,
+) -> Option<Primitive> {
     let normal = support.normal.normalize_or_zero();
     let (u, v) = plane_axes(normal);
     let top = points
@@ -453,11 +605,8 @@ fn standing_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Op
     // Then all the points at once (wall and top), standing on the support: the circle of the
     // wall alone is pulled by a rounded rim and by where the wall and the top were told apart.
     let make = |p: &[f32; 4]| {
-        (p[2] > 0.0 && p[3] > 0.0).then(|| Primitive {
-            shape: PrimitiveShape::Cylinder {
-                radius_m: p[2],
-                half_height_m: 0.5 * p[3],
-            },
+        Some(Primitive {
+            shape: kind.shape(p[2], 0.5 * p[3])?,
             rotation: Quat::from_rotation_arc(Vec3::Z, normal),
             centre: base + u * p[0] + v * p[1] + normal * (0.5 * p[3]),
             residual_m: 0.0,
@@ -468,9 +617,15 @@ fn standing_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Op
     make(&best)
 }
 
-/// A cylinder lying on the support: its axis the longest direction of the points in the plane,
-/// its section a circle fitted across it, touching the support.
-fn lying_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
+/// A cylinder or a capsule lying on the support: its axis the longest direction of the
+/// points in the plane, its section a circle fitted across it, touching the support; then all
+/// the points at once.
+fn lying_round(
+    points: &[Vec3],
+    support: SupportPlane,
+    bound_m: f32,
+    kind: Round,
+) -> Option<Primitive> {
     let normal = support.normal.normalize_or_zero();
     let (u, v) = plane_axes(normal);
     let flat: Vec<Vec2> = points
@@ -496,17 +651,19 @@ fn lying_cylinder(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Optio
         .map(|&p| Vec2::new(p.dot(across), support.height(p)))
         .collect();
     let (centre, radius) = fit_circle(&section)?;
-    // It lies on the support: the circle's lowest point on the plane.
-    let middle = 0.5 * (lo + hi);
-    let primitive = Primitive {
-        shape: PrimitiveShape::Cylinder {
-            radius_m: radius,
-            half_height_m: 0.5 * (hi - lo),
-        },
-        rotation: Quat::from_mat3(&Mat3::from_cols(across, normal, axis)).normalize(),
-        centre: axis * middle + across * centre.x + normal * (support.offset + centre.y),
-        residual_m: 0.0,
+    // It lies on the support: the circle's lowest point on the plane. Across, along, radius,
+    // half length.
+    let make = |p: &[f32; 4]| {
+        Some(Primitive {
+            shape: kind.shape(p[2], p[3])?,
+            rotation: Quat::from_mat3(&Mat3::from_cols(across, normal, axis)).normalize(),
+            centre: axis * p[1] + across * p[0] + normal * (support.offset + p[2]),
+            residual_m: 0.0,
+        })
     };
+    let start = [centre.x, 0.5 * (lo + hi), radius, 0.5 * (hi - lo)];
+    let best = refine(start, points, make).unwrap_or(start);
+    let primitive = make(&best)?;
     rests(&primitive, Some(support)).then_some(primitive)
 }
 
@@ -518,15 +675,9 @@ fn rests(primitive: &Primitive, support: Option<SupportPlane>) -> bool {
     };
     let normal = support.normal.normalize_or_zero();
     // The lowest point of the primitive along the normal.
-    let down = primitive.rotation.inverse() * -normal;
-    let reach = match primitive.shape {
-        PrimitiveShape::Sphere { radius_m } => radius_m,
-        PrimitiveShape::Box { half_m } => (down.abs() * half_m).element_sum(),
-        PrimitiveShape::Cylinder {
-            radius_m,
-            half_height_m,
-        } => down.z.abs() * half_height_m + radius_m * Vec2::new(down.x, down.y).length(),
-    };
+    let reach = primitive
+        .shape
+        .reach(primitive.rotation.inverse() * -normal);
     (support.height(primitive.centre) - reach).abs() <= 0.01
 }
 
@@ -576,9 +727,9 @@ fn free_box(points: &[Vec3]) -> Option<Primitive> {
     make(&best)
 }
 
-/// A cylinder in any orientation: its axis one of the points' principal axes (whichever fits
-/// best), refined (centre, axis, radius, half height).
-fn free_cylinder(points: &[Vec3]) -> Option<Primitive> {
+/// A cylinder or a capsule in any orientation: its axis one of the points' principal axes
+/// (whichever fits best), refined (centre, axis, radius, half length).
+fn free_round(points: &[Vec3], kind: Round) -> Option<Primitive> {
     let (mean, axes) = principal_axes(points);
     axes.iter()
         .filter_map(|&axis| {
@@ -593,11 +744,8 @@ fn free_cylinder(points: &[Vec3]) -> Option<Primitive> {
             radius /= points.len() as f32;
             let centre = mean + axis * (0.5 * (lo + hi));
             let make = |p: &[f32; 7]| {
-                (p[5] > 0.0 && p[6] > 0.0).then(|| Primitive {
-                    shape: PrimitiveShape::Cylinder {
-                        radius_m: p[5],
-                        half_height_m: p[6],
-                    },
+                Some(Primitive {
+                    shape: kind.shape(p[5], p[6])?,
                     rotation: (turn * Quat::from_scaled_axis(Vec3::new(p[3], p[4], 0.0)))
                         .normalize(),
                     centre: Vec3::new(p[0], p[1], p[2]),
@@ -623,7 +771,7 @@ fn free_cylinder(points: &[Vec3]) -> Option<Primitive> {
 }
 
 /// As [`fit_primitive`], for the points of a closed surface that stands on nothing known (a
-/// multi-view object, an offline cloud): a sphere, or a box or a cylinder in any orientation.
+/// multi-view object, an offline cloud): a sphere, or a box, a cylinder or a capsule in any orientation.
 /// Only for closed surfaces: on a one-view shell a box as deep as what was seen fits as well
 /// as the true one.
 pub fn fit_closed_primitive(points: &[Vec3], bound_m: f32) -> Option<Primitive> {
@@ -634,7 +782,8 @@ pub fn fit_closed_primitive(points: &[Vec3], bound_m: f32) -> Option<Primitive> 
     let candidates = [
         sphere(&points, None),
         free_box(&points),
-        free_cylinder(&points),
+        free_round(&points, Round::Cylinder),
+        free_round(&points, Round::Capsule),
     ];
     candidates
         .into_iter()
@@ -648,9 +797,118 @@ pub fn fit_closed_primitive(points: &[Vec3], bound_m: f32) -> Option<Primitive> 
         .min_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
 }
 
+/// What a primitive may be off a shape beyond the shape's own residual bound, metres: the
+/// sensor's noise at a metre or two, which the fused surface keeps some of.
+pub const PRIMITIVE_NOISE_M: f32 = 0.003;
+
+/// The primitive a published shape is, if one explains it: its mesh's surface points within
+/// its residual bound and the sensor's noise ([`PRIMITIVE_NOISE_M`]), resting on `support`
+/// (the plane it stands on, in its frame) when there is one; a closed shape on nothing known
+/// in any orientation. The daemon's bodies and a subscriber's scene both fit this way.
+///
+/// `container` is a closed solid known to hold the object: the shape itself when it is closed,
+/// else its conservative proxy (the space behind what was seen). A fit must lie within it (see
+/// [`lies_within`]): a flat patch of carpet is explained, to a few millimetres, by a slice of
+/// a cylinder a hundred metres wide lying on the floor, which the space behind the patch
+/// refuses.
+pub fn primitive_of_shape(
+    mesh: &TriMesh,
+    support: Option<SupportPlane>,
+    residual_bound_m: f32,
+    container: &TriMesh,
+) -> Option<Primitive> {
+    let points = surface_points(mesh);
+    let bound_m = residual_bound_m.max(0.0) + PRIMITIVE_NOISE_M;
+    let fit = match support {
+        None if mesh.is_closed() => fit_closed_primitive(&points, bound_m),
+        _ => fit_primitive(&points, support, bound_m),
+    }?;
+    match lies_within(&fit, container, support, bound_m) {
+        Ok(()) => Some(fit),
+        Err(why) => {
+            tracing::debug!("a {} fits the shape but {why}", fit.shape.name());
+            None
+        }
+    }
+}
+
+/// Whether `primitive` lies within the closed `solid` up to `bound_m`: its volume at most
+/// [`MAX_VOLUME_OVER_CONTAINER`] of the solid's, and at least 95 % of its surface, pulled
+/// `bound_m` inward, inside the solid (by the generalised winding number). Its surface within
+/// [`SUPPORT_BAND_M`] of the `support` is not judged: segmentation cuts what was seen of an
+/// object off above the table, so a shadow volume does not reach the foot of the object's
+/// near side. `Err` says why not.
+pub fn lies_within(
+    primitive: &Primitive,
+    solid: &TriMesh,
+    support: Option<SupportPlane>,
+    bound_m: f32,
+) -> Result<(), String> {
+    let held = MassProperties::of_closed_mesh(solid)
+        .map_err(|e| format!("the solid that holds it has no volume ({e})"))?;
+    let ratio = primitive.shape.volume_m3() / held.volume_m3;
+    if ratio.is_nan() || ratio > MAX_VOLUME_OVER_CONTAINER {
+        return Err(format!(
+            "is {ratio:.2}× the volume of the space that holds the object"
+        ));
+    }
+    let surface = surface_points(&primitive.mesh_with(16, 8));
+    let probes: Vec<Vec3> = surface
+        .iter()
+        .filter(|&&p| support.is_none_or(|s| s.height(p) > SUPPORT_BAND_M))
+        .map(|&p| {
+            // Inward along the direction to the nearest point of the primitive's axis or
+            // centre: the surface normal of a round primitive, near enough for a box's.
+            let inward = (primitive.centre - p).normalize_or_zero();
+            p + inward * bound_m
+        })
+        .collect();
+    let inside = probes
+        .iter()
+        .filter(|&&p| winding_number(solid, p) > 0.5)
+        .count();
+    if inside * 100 >= probes.len() * 95 {
+        Ok(())
+    } else {
+        Err(format!(
+            "{:.0} % of its surface is outside the space that holds the object",
+            100.0 * (1.0 - inside as f32 / probes.len().max(1) as f32)
+        ))
+    }
+}
+
+/// How far above its support a primitive's surface is not judged by [`lies_within`], metres.
+pub const SUPPORT_BAND_M: f32 = 0.015;
+
+/// The most a primitive may weigh over the solid that holds it: a shape's own volume and
+/// the primitive differ by the fit's residual over the surface.
+pub const MAX_VOLUME_OVER_CONTAINER: f32 = 1.25;
+
+/// The generalised winding number of a closed, outward mesh about `p`: 1 inside, 0 outside
+/// (Jacobson et al. 2013: the solid angles of its triangles, by van Oosterom and Strackee's
+/// formula, over 4π).
+fn winding_number(mesh: &TriMesh, p: Vec3) -> f32 {
+    let mut total = 0.0f64;
+    for t in &mesh.triangles {
+        let corner = |k: usize| {
+            mesh.vertices
+                .get(t[k] as usize)
+                .map(|&v| (v - p).as_dvec3())
+        };
+        let (Some(a), Some(b), Some(c)) = (corner(0), corner(1), corner(2)) else {
+            continue;
+        };
+        let (la, lb, lc) = (a.length(), b.length(), c.length());
+        let numerator = a.dot(b.cross(c));
+        let denominator = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
+        total += 2.0 * numerator.atan2(denominator);
+    }
+    (total / (4.0 * std::f64::consts::PI)) as f32
+}
+
 /// The primitive that explains `points` (what was seen of an object, in its frame) best, if
 /// one explains them within `bound_m` (95th percentile of the distances): of a box, a standing
-/// or lying cylinder and a sphere, each resting on `support` when there is one.
+/// or lying cylinder or capsule and a sphere, each resting on `support` when there is one.
 pub fn fit_primitive(
     points: &[Vec3],
     support: Option<SupportPlane>,
@@ -664,8 +922,10 @@ pub fn fit_primitive(
     candidates.extend(sphere(&points, support));
     if let Some(support) = support.filter(|s| s.normal.length() > 0.5) {
         candidates.extend(standing_box(&points, support, bound_m));
-        candidates.extend(standing_cylinder(&points, support, bound_m));
-        candidates.extend(lying_cylinder(&points, support, bound_m));
+        for kind in [Round::Cylinder, Round::Capsule] {
+            candidates.extend(standing_round(&points, support, bound_m, kind));
+            candidates.extend(lying_round(&points, support, bound_m, kind));
+        }
     }
     candidates
         .into_iter()
@@ -740,6 +1000,26 @@ mod tests {
                             Vec3::new(r * a.cos(), r * a.sin(), sign * half_height_m),
                             Vec3::Z * sign,
                         )
+                    } else {
+                        let d = Vec3::new(a.cos(), a.sin(), 0.0);
+                        (
+                            d * radius_m + Vec3::Z * (2.0 * s.x - 1.0) * half_height_m,
+                            d,
+                        )
+                    }
+                }
+                PrimitiveShape::Capsule {
+                    radius_m,
+                    half_height_m,
+                } => {
+                    // The wall and the two caps in proportion to their areas, about.
+                    let a = std::f32::consts::TAU * s.y;
+                    if i % 4 == 0 {
+                        let z = s.x;
+                        let r = (1.0 - z * z).max(0.0).sqrt();
+                        let sign = if i % 8 == 0 { 1.0 } else { -1.0 };
+                        let d = Vec3::new(r * a.cos(), r * a.sin(), sign * z);
+                        (d * radius_m + Vec3::Z * sign * half_height_m, d)
                     } else {
                         let d = Vec3::new(a.cos(), a.sin(), 0.0);
                         (
@@ -831,6 +1111,32 @@ mod tests {
     }
 
     #[test]
+    fn a_lying_capsule_is_a_capsule_and_a_standing_one_too() {
+        let lying = Primitive {
+            shape: PrimitiveShape::Capsule {
+                radius_m: 0.03,
+                half_height_m: 0.07,
+            },
+            rotation: Quat::from_rotation_z(-0.4)
+                * Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            centre: Vec3::new(0.05, 0.0, 0.03),
+            residual_m: 0.0,
+        };
+        let fit = check(lying, "capsule");
+        assert!((fit.rotation * Vec3::Z).z.abs() < 0.05, "lying: {fit:?}");
+        let standing = Primitive {
+            shape: PrimitiveShape::Capsule {
+                radius_m: 0.04,
+                half_height_m: 0.06,
+            },
+            rotation: Quat::IDENTITY,
+            centre: Vec3::new(0.0, 0.1, 0.1),
+            residual_m: 0.0,
+        };
+        check(standing, "capsule");
+    }
+
+    #[test]
     fn a_ball_on_the_table_is_a_sphere() {
         let truth = Primitive {
             shape: PrimitiveShape::Sphere { radius_m: 0.07 },
@@ -871,6 +1177,15 @@ mod tests {
                 centre: Vec3::new(0.0, 0.2, 0.3),
                 residual_m: 0.0,
             },
+            Primitive {
+                shape: PrimitiveShape::Capsule {
+                    radius_m: 0.1,
+                    half_height_m: 0.2,
+                },
+                rotation: turn,
+                centre: Vec3::new(0.0, 0.2, 0.3),
+                residual_m: 0.0,
+            },
         ] {
             let points = all_round(&truth, 6000, 0.002);
             let fit = fit_closed_primitive(&points, 0.006).expect("a primitive");
@@ -899,6 +1214,73 @@ mod tests {
         assert_eq!(fit_primitive(&[], Some(TABLE), BOUND_M), None);
     }
 
+    /// A patch of carpet a few millimetres over the floor, seen from above, is explained
+    /// within the bound by a cylinder tens of metres wide lying on the floor (as on the milk
+    /// scan); the space behind the patch (its extrusion to the floor) refuses it. A box is a
+    /// box, and a box twice as long is not within it.
+    #[test]
+    fn a_primitive_must_lie_within_the_space_that_holds_the_object() {
+        let (n, lift) = (12u32, 0.005f32);
+        let mut vertices = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (0.3 * i as f32 / n as f32, 0.25 * j as f32 / n as f32);
+                // A gentle bulge, as a real patch has, and no more than the noise.
+                let z = lift + 0.002 * (std::f32::consts::PI * x / 0.3).sin();
+                vertices.push(Vec3::new(x, y, z));
+            }
+        }
+        let mut triangles = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let k = j * (n + 1) + i;
+                triangles.push([k, k + 1, k + n + 2]);
+                triangles.push([k, k + n + 2, k + n + 1]);
+            }
+        }
+        let patch = TriMesh::new(vertices, triangles);
+        let held = crate::proxy::collision_proxy(
+            &patch,
+            None,
+            Some(TABLE),
+            &crate::proxy::ProxyConfig {
+                margin_m: BOUND_M,
+                ..crate::proxy::ProxyConfig::default()
+            },
+        );
+        assert!(held.closed);
+        let unchecked = fit_primitive(&surface_points(&patch), Some(TABLE), BOUND_M + 0.003);
+        assert!(
+            unchecked.is_some_and(|p| p.shape.volume_m3() > 0.01),
+            "the fit alone takes a huge primitive: {unchecked:?}"
+        );
+        let refused = primitive_of_shape(&patch, Some(TABLE), BOUND_M, &held.mesh);
+        assert_eq!(refused, None, "a flat patch is no primitive");
+
+        let truth = Primitive {
+            shape: PrimitiveShape::Box {
+                half_m: Vec3::new(0.1, 0.06, 0.08),
+            },
+            rotation: Quat::from_rotation_z(0.5),
+            centre: Vec3::new(0.1, 0.2, 0.08),
+            residual_m: 0.0,
+        };
+        let whole = truth.mesh();
+        let fit = primitive_of_shape(&whole, Some(TABLE), BOUND_M, &whole).expect("a box");
+        assert_eq!(fit.shape.name(), "box");
+        assert_eq!(lies_within(&truth, &whole, Some(TABLE), BOUND_M), Ok(()));
+        let twice = Primitive {
+            shape: PrimitiveShape::Box {
+                half_m: Vec3::new(0.2, 0.06, 0.08),
+            },
+            ..truth
+        };
+        assert!(
+            lies_within(&twice, &whole, Some(TABLE), BOUND_M).is_err(),
+            "twice as long"
+        );
+    }
+
     #[test]
     fn primitive_meshes_are_closed_outward_and_weigh_about_as_much() {
         for shape in [
@@ -910,6 +1292,10 @@ mod tests {
                 half_height_m: 0.2,
             },
             PrimitiveShape::Sphere { radius_m: 0.1 },
+            PrimitiveShape::Capsule {
+                radius_m: 0.1,
+                half_height_m: 0.15,
+            },
         ] {
             let primitive = Primitive {
                 shape,
@@ -922,6 +1308,48 @@ mod tests {
             let ratio = mesh.volume_m3 / exact.volume_m3;
             assert!((0.9..=1.0001).contains(&ratio), "{}: {ratio}", shape.name());
             assert!(mesh.centre_of_mass.distance(exact.centre_of_mass) < 1e-4);
+            // A fine tessellation's inertia is the closed form's.
+            let fine =
+                MassProperties::of_closed_mesh(&primitive.mesh_with(128, 64)).expect("closed");
+            for (row, exact_row) in fine.inertia.iter().zip(&exact.inertia) {
+                for (a, b) in row.iter().zip(exact_row) {
+                    let scale = exact.inertia[0][0].abs().max(exact.inertia[2][2].abs());
+                    assert!((a - b).abs() < 0.01 * scale, "{}: {a} vs {b}", shape.name());
+                }
+            }
+            // The covering hull is convex and holds the primitive, by little.
+            let cover = primitive.covering_mesh();
+            assert!(cover.is_closed(), "{}", shape.name());
+            let planes: Vec<(Vec3, f32)> = cover
+                .triangles
+                .iter()
+                .filter_map(|t| {
+                    let [a, b, c] = t.map(|i| cover.vertices[i as usize]);
+                    let n = (b - a).cross(c - a).try_normalize()?;
+                    Some((n, n.dot(a)))
+                })
+                .collect();
+            let surface = primitive.mesh_with(128, 64);
+            for &p in &surface.vertices {
+                let outside = planes
+                    .iter()
+                    .map(|&(n, d)| n.dot(p) - d)
+                    .fold(f32::NEG_INFINITY, f32::max);
+                assert!(
+                    outside <= 1e-5,
+                    "{}: {p} is {outside} m outside",
+                    shape.name()
+                );
+            }
+            let grown = MassProperties::of_closed_mesh(&cover)
+                .expect("closed")
+                .volume_m3;
+            assert!(
+                (0.9999..1.06).contains(&(grown / exact.volume_m3)),
+                "{}: the cover is {}× the primitive",
+                shape.name(),
+                grown / exact.volume_m3
+            );
         }
     }
 

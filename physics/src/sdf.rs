@@ -159,9 +159,9 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
                 "<surface><contact><collide_bitmask>{bit}</collide_bitmask></contact></surface>"
             )
         };
-        if let Some(primitive) = &body.primitive {
-            // The engine's own shape: exact contact, true normals.
-            let geom_name = names.claim(&format!("{name}_{}", primitive.shape.name()));
+        // SDFormat has a capsule only from 1.8 on, and this world is 1.6 (what Gazebo Classic
+        // and PyBullet read): a capsule goes as its covering hull, with the convex parts.
+        let native = body.primitive.and_then(|primitive| {
             let geometry = match primitive.shape {
                 PrimitiveShape::Box { half_m } => {
                     format!(
@@ -180,14 +180,20 @@ pub fn sdf_document(scene: &Scene, config: &SdfConfig) -> Result<SdfDocument, Ph
                 PrimitiveShape::Sphere { radius_m } => {
                     format!("<sphere><radius>{}</radius></sphere>", number(radius_m))
                 }
+                PrimitiveShape::Capsule { .. } => return None,
             };
+            Some((primitive, geometry))
+        });
+        if let Some((primitive, geometry)) = &native {
+            // The engine's own shape: exact contact, true normals.
+            let geom_name = names.claim(&format!("{name}_{}", primitive.shape.name()));
             let _ = writeln!(
                 world,
                 r#"        <collision name="{geom_name}"><pose>{}</pose><geometry>{geometry}</geometry>{surface}</collision>"#,
                 sdf_pose(primitive.rotation, primitive.centre),
             );
         }
-        let parts = if body.primitive.is_some() {
+        let parts = if native.is_some() {
             &[][..]
         } else {
             &body.convex_parts[..]
@@ -443,6 +449,17 @@ mod tests {
             xml.contains("<geometry><cylinder><radius>0.05</radius><length>0.16</length></cylinder></geometry>"),
             "{xml}"
         );
+        // A capsule goes as the body's convex parts (its covering hull): SDFormat 1.6 has none.
+        scene.bodies[1].primitive = Some(crate::primitive::Primitive {
+            shape: PrimitiveShape::Capsule {
+                radius_m: 0.03,
+                half_height_m: 0.07,
+            },
+            ..primitive
+        });
+        let xml = sdf_document(&scene, &SdfConfig::default()).unwrap().xml;
+        assert!(!xml.contains("capsule>"), "{xml}");
+        assert!(xml.contains(r#"<collision name="box_1_part0">"#), "{xml}");
     }
 
     #[test]

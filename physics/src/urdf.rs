@@ -151,7 +151,8 @@ pub fn urdf_documents(scene: &Scene, config: &UrdfConfig) -> Result<UrdfDocument
                 r#"    <inertial><mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>"#
             );
         }
-        if let Some(primitive) = &body.primitive {
+        // URDF has no capsule: a capsule goes as its covering hull, with the convex parts.
+        let native = body.primitive.and_then(|primitive| {
             let geometry = match primitive.shape {
                 PrimitiveShape::Box { half_m } => {
                     format!(r#"<box size="{}"/>"#, numbers(&(2.0 * half_m).to_array()))
@@ -167,7 +168,11 @@ pub fn urdf_documents(scene: &Scene, config: &UrdfConfig) -> Result<UrdfDocument
                 PrimitiveShape::Sphere { radius_m } => {
                     format!(r#"<sphere radius="{}"/>"#, number(radius_m))
                 }
+                PrimitiveShape::Capsule { .. } => return None,
             };
+            Some((primitive, geometry))
+        });
+        if let Some((primitive, geometry)) = &native {
             let _ = writeln!(
                 link,
                 "    <collision>{}<geometry>{geometry}</geometry></collision>",
