@@ -96,16 +96,36 @@ def shape(object_id, version, vertices, triangles, compact=False):
 
 
 def body(object_id, version, vertices, triangles, compact=False):
-    # A shadow-volume body (docs/protocol.md, Body): the proxy in either encoding, then one
-    # hull of the same vertices, full precision with byte indices.
-    payload = struct.pack("<QQBff3f6fBII", object_id, version, 1, 0.004, 1e-4,
-                          0.03, 0.03, 0.03, 1e-6, 1e-6, 1e-6, 0, 0, 0,
-                          1 if compact else 0, len(vertices), len(triangles))
+    # A shadow-volume body (docs/protocol.md, Body): no primitive (its 45 bytes zero), the
+    # solid in either encoding, then one hull of the same vertices, full precision with byte
+    # indices.
+    payload = struct.pack("<QQBff3f6f", object_id, version, 3, 0.004, 1e-4,
+                          0.03, 0.03, 0.03, 1e-6, 1e-6, 1e-6, 0, 0, 0)
+    payload += bytes(45)
+    payload += struct.pack("<BII", 1 if compact else 0, len(vertices), len(triangles))
     payload += geometry(vertices, triangles, compact)
     payload += struct.pack("<BBH", 1, len(vertices), len(triangles))
     payload += b"".join(struct.pack("<3f", *v) for v in vertices)
     payload += b"".join(struct.pack("<3B", *t) for t in triangles)
-    return frame(0x0B, payload)
+    return frame(0x0C, payload)
+
+
+def primitive_body(object_id, version):
+    # A box like docs/protocol.md's second Body example, not turned: its primitive, no mesh,
+    # one hull of its eight corners.
+    half = (0.1, 0.05, 0.15)
+    corners = [(sx * half[0], sy * half[1], 0.15 + sz * half[2])
+               for sz in (-1, 1) for sy in (-1, 1) for sx in (-1, 1)]
+    faces = [(0, 4, 6), (0, 6, 2), (1, 3, 7), (1, 7, 5), (0, 1, 5), (0, 5, 4),
+             (2, 6, 7), (2, 7, 3), (0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6)]
+    payload = struct.pack("<QQBff3f6f", object_id, version, 1, 0.0, 0.006,
+                          0.0, 0.0, 0.15, 5e-5, 6.5e-5, 2.5e-5, 0, 0, 0)
+    payload += struct.pack("<B3f4f3ff", 1, *half, 0, 0, 0, 1, 0, 0, 0.15, 0.002)
+    payload += struct.pack("<BII", 0, 0, 0)
+    payload += struct.pack("<BBH", 1, len(corners), len(faces))
+    payload += b"".join(struct.pack("<3f", *v) for v in corners)
+    payload += b"".join(struct.pack("<3B", *t) for t in faces)
+    return frame(0x0C, payload)
 
 
 def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=7, ids=()):
@@ -117,7 +137,7 @@ def subscribe(encoding=0, resend=0, rate_hz=0.0, kinds=7, ids=()):
 def wire_seeds():
     tetrahedron = ([(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0, 0, 0.1)],
                    [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)])
-    hello = frame(0x01, struct.pack("<H", 3) + text("tacmesh 0.1.0"))
+    hello = frame(0x01, struct.pack("<H", 4) + text("tacmesh 0.1.0"))
     options = subscribe()[5:]
     session = frame(0x07, struct.pack("<QQ", 5_000_000_000, 1_700_000_005_000_000_000) + options)
     stats = frame(0x0A, struct.pack("<19QIffI", 2_000_000_000, 1_700_000_002_000_000_000, 900,
@@ -127,7 +147,8 @@ def wire_seeds():
                   + text("simplify") + struct.pack("<2f", 1.5, 3.25))
     goodbye = frame(0x06, text("shutting down"))
     server = (hello + session + shape(7, 1, *tetrahedron) + body(7, 1, *tetrahedron)
-              + body(7, 1, *tetrahedron, compact=True) + frame(0x09, pose(7, 1))
+              + body(7, 1, *tetrahedron, compact=True) + primitive_body(7, 1)
+              + frame(0x09, pose(7, 1))
               + frame(0x04) + shape(7, 2, *tetrahedron, compact=True)
               + frame(0x09, pose(7, 2, 2_000_000_000)) + frame(0x03, struct.pack("<Q", 7))
               + stats + goodbye)
@@ -143,6 +164,7 @@ def wire_seeds():
         "pose": b"\xff" + frame(0x09, pose(3, 4)),
         "body": b"\xff" + body(1, 1, *tetrahedron),
         "body-compact": b"\xff" + body(1, 1, *tetrahedron, compact=True),
+        "body-primitive": b"\xff" + primitive_body(1, 1),
         "stats": b"\xff" + stats,
         "goodbye": b"\xff" + goodbye,
         "client-subscribe": b"\x03" + subscribe() + subscribe(1, 1, 10.0, 1, (4, 5)),

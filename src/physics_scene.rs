@@ -20,24 +20,20 @@
 use std::collections::HashMap;
 
 use glam::Vec3;
-use tacmesh_physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
+use tacmesh_physics::proxy::{collision_proxy, Proxy, ProxyConfig, SupportPlane};
 use tacmesh_physics::scene::{
     Exclusion, Member, Motion, Scene as SimScene, SceneBody, SceneSupport, WorldFromBody,
     SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
 };
 use tacmesh_physics::{
-    convex_parts, fit_closed_primitive, fit_primitive, lift_onto_supports, rests_on,
-    starting_overlaps, surface_points, ConvexConfig, MassProperties, Primitive, WorldSupport,
-    LIFT_MAX_M, OVERLAP_TOLERANCE_M,
+    convex_parts, lift_onto_supports, primitive_of_shape, rests_on, starting_overlaps,
+    ConvexConfig, MassProperties, Primitive, PrimitiveShape, WorldSupport, LIFT_MAX_M,
+    OVERLAP_TOLERANCE_M,
 };
-use tacmesh_protocol::{Body, BodyProxy, Hull, Scene, SceneObject};
+use tacmesh_protocol::{Body, BodyPrimitive, Hull, Scene, SceneObject};
 use tacmesh_source::TriMesh;
 
 use crate::daemon::planes::FIRST_PLANE_ID;
-
-/// What a primitive may be off a shape beyond the shape's own residual bound, metres: the
-/// sensor's noise at a metre or two, which the fused surface keeps some of.
-const PRIMITIVE_NOISE_M: f32 = 0.003;
 
 /// How high above its support an object's parts count as its foot, metres.
 const FOOT_M: f32 = 0.03;
@@ -51,9 +47,9 @@ struct Collision {
     /// The shape version of the published Body they are, or `None` when made here.
     body_version: Option<u64>,
     /// The parts and their mass, or why there are none.
-    parts: Result<(Vec<TriMesh>, MassProperties, ProxyKind), String>,
-    /// The primitive the shape is, if one explains it (then the body is that primitive), with
-    /// its tessellation and mass properties, made once per shape.
+    parts: Result<(Vec<TriMesh>, MassProperties), String>,
+    /// The primitive the object is (its published Body's, or fitted here to its shape until
+    /// a Body comes), with its covering hull and mass properties, made once per shape.
     primitive: Option<(Primitive, Vec<TriMesh>, MassProperties)>,
 }
 
@@ -155,19 +151,28 @@ impl PhysicsScene {
                 c.shape_version != object.shape.version() || c.body_version != body_version
             });
             if stale {
-                let points = surface_points(&object.shape.mesh);
-                let bound_m = object.shape.report.max_residual_m + PRIMITIVE_NOISE_M;
-                // Resting on its support; a closed shape on nothing known, in any orientation.
-                let primitive = match support {
-                    None if object.shape.mesh.is_closed() => fit_closed_primitive(&points, bound_m),
-                    _ => fit_primitive(&points, support, bound_m),
+                // The daemon fits the same way from the same shape: its Body says. Until a
+                // Body comes, the fit must lie within the proxy made here.
+                let proxy = object.body.is_none().then(|| object_proxy(object, support));
+                let primitive = match (&object.body, &proxy) {
+                    (Some(body), _) => body.primitive.as_ref().map(physics_primitive),
+                    (None, Some(proxy)) if proxy.closed => primitive_of_shape(
+                        &object.shape.mesh,
+                        support,
+                        object.shape.report.max_residual_m,
+                        &proxy.mesh,
+                    ),
+                    (None, _) => None,
                 };
                 primitives.push((id, primitive.map(|p| (p.shape.name(), p.residual_m))));
                 let parts = match &object.body {
                     Some(body) => Ok(published_parts(body)),
                     None => {
                         decomposed += 1;
-                        collision_parts(object, support)
+                        match proxy {
+                            Some(proxy) => collision_parts(proxy),
+                            None => Err("no proxy".to_owned()),
+                        }
                     }
                 };
                 self.collisions.insert(
@@ -176,7 +181,7 @@ impl PhysicsScene {
                         shape_version: object.shape.version(),
                         body_version,
                         parts,
-                        primitive: primitive.map(|p| (p, vec![p.mesh()], p.mass())),
+                        primitive: primitive.map(|p| (p, vec![p.covering_mesh()], p.mass())),
                     },
                 );
             }
@@ -187,7 +192,7 @@ impl PhysicsScene {
             // A primitive is the object whole: its mass, and the engine's exact collisions.
             let parts = match (&collision.parts, &collision.primitive) {
                 (_, Some((_, mesh, mass))) => Ok((mesh, mass)),
-                (Ok((parts, mass, _)), None) => Ok((parts, mass)),
+                (Ok((parts, mass)), None) => Ok((parts, mass)),
                 (Err(why), None) => Err(why),
             };
             match parts {
@@ -306,27 +311,47 @@ impl PhysicsScene {
 }
 
 /// The convex parts and mass properties of a published Body.
-fn published_parts(body: &Body) -> (Vec<TriMesh>, MassProperties, ProxyKind) {
-    let kind = match body.proxy {
-        BodyProxy::Shape => ProxyKind::Surface,
-        BodyProxy::ShadowVolume => ProxyKind::ShadowVolume,
-        BodyProxy::Extrusion => ProxyKind::Extrusion,
-    };
+fn published_parts(body: &Body) -> (Vec<TriMesh>, MassProperties) {
     let mass = MassProperties {
         volume_m3: body.volume_m3,
         centre_of_mass: body.centre_of_mass,
         inertia: body.inertia,
     };
-    (body.hulls.iter().map(Hull::mesh).collect(), mass, kind)
+    (body.hulls.iter().map(Hull::mesh).collect(), mass)
 }
 
-/// The convex parts and mass properties of one object: its closed shape's, or its open shell's
-/// extruded onto its support.
-fn collision_parts(
-    object: &SceneObject,
-    support: Option<SupportPlane>,
-) -> Result<(Vec<TriMesh>, MassProperties, ProxyKind), String> {
-    let proxy = collision_proxy(
+/// A Body's primitive as the physics crate has it.
+pub fn physics_primitive(primitive: &BodyPrimitive) -> Primitive {
+    use tacmesh_protocol::PrimitiveShape as Wire;
+    Primitive {
+        shape: match primitive.shape {
+            Wire::Box { half_m } => PrimitiveShape::Box { half_m },
+            Wire::Cylinder {
+                radius_m,
+                half_height_m,
+            } => PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            },
+            Wire::Sphere { radius_m } => PrimitiveShape::Sphere { radius_m },
+            Wire::Capsule {
+                radius_m,
+                half_height_m,
+            } => PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            },
+        },
+        rotation: primitive.rotation,
+        centre: primitive.centre,
+        residual_m: primitive.residual_m,
+    }
+}
+
+/// The closed proxy of one object's shape: its closed shape, or its open shell extruded onto
+/// its support and grown by its residual.
+fn object_proxy(object: &SceneObject, support: Option<SupportPlane>) -> Proxy {
+    collision_proxy(
         &object.shape.mesh,
         None,
         support,
@@ -334,7 +359,11 @@ fn collision_parts(
             margin_m: object.shape.report.max_residual_m,
             ..ProxyConfig::default()
         },
-    );
+    )
+}
+
+/// The convex parts and mass properties of an object's proxy.
+fn collision_parts(proxy: Proxy) -> Result<(Vec<TriMesh>, MassProperties), String> {
     if !proxy.closed {
         return Err(format!(
             "its {} is not closed (an open shell with no support under it)",
@@ -342,7 +371,7 @@ fn collision_parts(
         ));
     }
     let parts = convex_parts(&proxy.mesh, &ConvexConfig::default()).map_err(|e| e.to_string())?;
-    Ok((parts.hulls, parts.mesh_mass, proxy.kind))
+    Ok((parts.hulls, parts.mesh_mass))
 }
 
 /// A physics scene of meshes made offline (`tacmesh mesh --mjcf/--sdf/--urdf`): each object's

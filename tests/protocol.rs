@@ -13,7 +13,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use tacmesh::glam::Vec3;
 use tacmesh::protocol::{
-    encode, BodyProxy, Encoding, FrameDecoder, Kinds, Message, Scene, Sender, Shape, Stats,
+    encode, BodySolid, Encoding, FrameDecoder, Kinds, Message, Scene, Sender, Shape, Stats,
     Subscribe, FIRST_SUPPORT_ID, PROTOCOL_VERSION,
 };
 use tacmesh::source::monotonic_now;
@@ -426,13 +426,25 @@ fn check_bodies(full: &Read1, compact: &Read1, supports_only: &Read1) {
             "{} hulls",
             body.hulls.len()
         );
-        let volume = match body.proxy {
-            BodyProxy::Shape => {
+        let volume = match body.solid {
+            BodySolid::Shape => {
                 assert!(
                     held.shape.is_closed(),
                     "object {id}: an open shape as its own proxy"
                 );
                 signed_volume_m3(&held.shape.mesh)
+            }
+            BodySolid::Primitive => {
+                let primitive = body
+                    .primitive
+                    .as_ref()
+                    .expect("a primitive body's primitive");
+                assert!(
+                    body.mesh.triangles.is_empty(),
+                    "object {id}: a primitive with a mesh"
+                );
+                let exact = tacmesh::physics_scene::physics_primitive(primitive).mass();
+                f64::from(exact.volume_m3)
             }
             _ => {
                 // Closed and consistently wound; where a proxy pinches, an edge may be shared by
@@ -446,7 +458,7 @@ fn check_bodies(full: &Read1, compact: &Read1, supports_only: &Read1) {
         };
         // The shape itself may be a newer version than the body's (same frame): its volume
         // is then not the body's, so only a proxy mesh is compared.
-        if body.proxy != BodyProxy::Shape || body.shape_version == held.shape.version() {
+        if body.solid != BodySolid::Shape || body.shape_version == held.shape.version() {
             assert!(
                 (f64::from(body.volume_m3) - volume).abs() <= 1e-3 * volume.abs(),
                 "object {id}: body volume {} against its proxy's {volume}",

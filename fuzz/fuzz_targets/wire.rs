@@ -14,8 +14,8 @@
 //!   - re-encoded compactly it decodes to the same shape but for its vertices and a residual
 //!     no smaller, unless the box spans more than an `f32` holds or the residual plus the
 //!     bound overflows (both only for coordinates near `f32::MAX`);
-//! - a Body whose proxy is compact likewise: in the full encoding it decodes to the same body,
-//!   and compactly to the same body but for its proxy's vertices;
+//! - a Body whose solid is compact likewise: in the full encoding it decodes to the same body,
+//!   and compactly to the same body but for its solid's vertices;
 //! - the decoder never buffers more than one frame beyond what was taken out;
 //! - a decoded Subscribe's rate cap, as the interval the daemon makes of it, fits both
 //!   `Duration` and `Instant` (a rate of 1e-45 Hz once aborted the daemon there).
@@ -138,7 +138,7 @@ fn check_compact_shape(shape: &Shape, from: Sender) {
     }
 }
 
-/// The round trips a decoded body with a compact proxy must survive (see the top of the file).
+/// The round trips a decoded body with a compact solid must survive (see the top of the file).
 fn check_compact_body(body: &Body, from: Sender) {
     let full = Message::Body(Body {
         encoding: Encoding::Full,

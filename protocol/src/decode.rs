@@ -6,16 +6,17 @@ use glam::{Quat, Vec3};
 use tacmesh_source::TriMesh;
 
 use crate::encode::{
-    check_body_proxy, check_finite, check_flags, check_hull_count, check_hull_size, check_id_count,
-    check_kinds, check_number, check_pose, check_rate, check_triangle, check_vertex,
-    compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, HULL_TRIANGLE_BYTES, ID_BYTES,
-    PREFIX_BYTES, SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE, SUBSCRIBE_RESEND,
-    TRIANGLE_BYTES, VERTEX_BYTES,
+    check_body_solid, check_finite, check_flags, check_hull_count, check_hull_size, check_id_count,
+    check_kinds, check_number, check_pose, check_primitive, check_rate, check_triangle,
+    check_vertex, compact_index_bytes, CompactBox, COMPACT_VERTEX_BYTES, HULL_TRIANGLE_BYTES,
+    ID_BYTES, PREFIX_BYTES, SHAPE_FLAGS, STAGE_FIXED_BYTES, SUBSCRIBE_EXTRAPOLATE,
+    SUBSCRIBE_RESEND, TRIANGLE_BYTES, VERTEX_BYTES,
 };
 use crate::error::WireError;
 use crate::message::{
-    kind, Body, BodyProxy, Encoding, Hull, Message, Pose, Sender, Session, Shape, SimplifyStats,
-    StageLatency, Stats, Subscribe, MAX_FRAME_BYTES, MAX_NAME_BYTES, MAX_REASON_BYTES,
+    kind, Body, BodyPrimitive, BodySolid, Encoding, Hull, Message, Pose, PrimitiveShape, Sender,
+    Session, Shape, SimplifyStats, StageLatency, Stats, Subscribe, MAX_FRAME_BYTES, MAX_NAME_BYTES,
+    MAX_REASON_BYTES,
 };
 
 /// Splits a byte stream into frames and decodes them, for one direction of a connection.
@@ -237,12 +238,12 @@ fn read_geometry(
 fn read_body(r: &mut Reader<'_>) -> Result<Body, WireError> {
     let object_id = r.u64("object_id")?;
     let shape_version = r.u64("shape_version")?;
-    let proxy_byte = r.u8("proxy")?;
-    let proxy = BodyProxy::from_byte(proxy_byte).ok_or(WireError::InvalidEnum {
+    let solid_byte = r.u8("solid")?;
+    let solid = BodySolid::from_byte(solid_byte).ok_or(WireError::InvalidEnum {
         message: r.message,
-        field: "proxy",
-        value: proxy_byte,
-        defined: "0 shape, 1 shadow volume, 2 extrusion",
+        field: "solid",
+        value: solid_byte,
+        defined: "0 shape, 1 primitive, 2 completed solid, 3 shadow volume, 4 extrusion",
     })?;
     let margin_m = r.f32("margin_m")?;
     check_number("margin_m", margin_m)?;
@@ -256,8 +257,16 @@ fn read_body(r: &mut Reader<'_>) -> Result<Body, WireError> {
     check_finite(r.message, "inertia", &entries)?;
     let [xx, yy, zz, xy, xz, yz] = entries;
     let inertia = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
+    let primitive = read_primitive(r, object_id)?;
     let (encoding, mesh) = read_geometry(r, |vertices, triangles| {
-        check_body_proxy(object_id, proxy, volume_m3, vertices, triangles)
+        check_body_solid(
+            object_id,
+            solid,
+            volume_m3,
+            primitive.is_some(),
+            vertices,
+            triangles,
+        )
     })?;
     let hull_count = usize::from(r.u8("hull_count")?);
     check_hull_count(object_id, hull_count)?;
@@ -290,15 +299,73 @@ fn read_body(r: &mut Reader<'_>) -> Result<Body, WireError> {
     Ok(Body {
         object_id,
         shape_version,
-        proxy,
+        solid,
         margin_m,
         volume_m3,
         centre_of_mass,
         inertia,
+        primitive,
         mesh,
         encoding,
         hulls,
     })
+}
+
+/// A Body's primitive block: `None` for kind 0 (whose other bytes must be 0).
+fn read_primitive(r: &mut Reader<'_>, object_id: u64) -> Result<Option<BodyPrimitive>, WireError> {
+    let kind = r.u8("primitive kind")?;
+    let sizes = [
+        r.f32("primitive sizes")?,
+        r.f32("primitive sizes")?,
+        r.f32("primitive sizes")?,
+    ];
+    let rotation: [f32; 4] = [
+        r.f32("primitive rotation")?,
+        r.f32("primitive rotation")?,
+        r.f32("primitive rotation")?,
+        r.f32("primitive rotation")?,
+    ];
+    let centre = r.vec3("primitive centre")?;
+    let residual_m = r.f32("primitive residual_m")?;
+    if kind == 0 {
+        let unused = sizes
+            .iter()
+            .chain(&rotation)
+            .chain(&centre.to_array())
+            .chain(std::iter::once(&residual_m))
+            .all(|v| v.to_bits() == 0);
+        return if unused {
+            Ok(None)
+        } else {
+            Err(WireError::BadPrimitiveSize {
+                object_id,
+                kind: "absent (kind 0)",
+                sizes,
+            })
+        };
+    }
+    let shape = PrimitiveShape::from_wire(kind, sizes).ok_or(WireError::InvalidEnum {
+        message: r.message,
+        field: "primitive kind",
+        value: kind,
+        defined: "0 none, 1 box, 2 cylinder, 3 sphere, 4 capsule",
+    })?;
+    // Every size field the kind does not use is 0: garbage is refused, not ignored.
+    if shape.sizes().map(f32::to_bits) != sizes.map(f32::to_bits) {
+        return Err(WireError::BadPrimitiveSize {
+            object_id,
+            kind: shape.name(),
+            sizes,
+        });
+    }
+    let primitive = BodyPrimitive {
+        shape,
+        rotation: glam::Quat::from_array(rotation),
+        centre,
+        residual_m,
+    };
+    check_primitive(object_id, &primitive)?;
+    Ok(Some(primitive))
 }
 
 /// V × 3 f32 vertices, then T × 3 u32 indices.

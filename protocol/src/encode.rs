@@ -9,10 +9,10 @@ use tacmesh_source::TriMesh;
 
 use crate::error::WireError;
 use crate::message::{
-    quantisation_bound_m, Body, BodyProxy, Encoding, Hull, Kinds, Message, Pose, Session, Shape,
-    Stats, Subscribe, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES, MAX_RATE_HZ,
-    MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES, MIN_RATE_HZ, SHAPE_CLOSED,
-    SHAPE_NEW_FRAME, SHAPE_SUPPORT,
+    quantisation_bound_m, Body, BodyPrimitive, BodySolid, Encoding, Hull, Kinds, Message, Pose,
+    Session, Shape, Stats, Subscribe, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES,
+    MAX_NAME_BYTES, MAX_RATE_HZ, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES,
+    MIN_RATE_HZ, SHAPE_CLOSED, SHAPE_NEW_FRAME, SHAPE_SUPPORT,
 };
 
 // ---- layout sizes (docs/protocol.md, "Messages") ----------------------------------------------
@@ -42,9 +42,13 @@ pub(crate) const SESSION_CLOCK_BYTES: usize = 2 * 8;
 pub(crate) const STATS_HEADER_BYTES: usize = 19 * 8 + 4 + 2 * 4 + 4;
 /// Bytes of one stage besides its name: u16 name length, 2 × f32 latencies.
 pub(crate) const STAGE_FIXED_BYTES: usize = 2 + 2 * 4;
-/// A Body payload before its proxy's geometry: id and version, the proxy byte, the margin,
-/// volume, centre of mass and six inertia entries, the encoding byte and the two u32 counts.
-pub(crate) const BODY_HEADER_BYTES: usize = 2 * 8 + 1 + 4 + 4 + 3 * 4 + 6 * 4 + 1 + 2 * 4;
+/// A Body payload before its solid's geometry: id and version, the solid byte, the margin,
+/// volume, centre of mass and six inertia entries, the primitive, the encoding byte and the
+/// two u32 counts.
+pub(crate) const BODY_HEADER_BYTES: usize =
+    2 * 8 + 1 + 4 + 4 + 3 * 4 + 6 * 4 + PRIMITIVE_BYTES + 1 + 2 * 4;
+/// A Body's primitive: the kind byte, three sizes, the rotation, the centre, the residual.
+pub(crate) const PRIMITIVE_BYTES: usize = 1 + 3 * 4 + 4 * 4 + 3 * 4 + 4;
 /// A hull before its vertices: the u8 vertex count and the u16 triangle count.
 pub(crate) const HULL_HEADER_BYTES: usize = 1 + 2;
 /// One hull triangle: three u8 indices.
@@ -194,12 +198,13 @@ pub(crate) fn check_triangle(
     }
 }
 
-/// A body's volume is finite and positive, and a proxy that is the shape itself carries no
-/// mesh.
-pub(crate) fn check_body_proxy(
+/// A body's volume is finite and positive, a solid that is the shape itself or a primitive
+/// carries no mesh, and a primitive is there exactly when the solid is one.
+pub(crate) fn check_body_solid(
     object_id: u64,
-    proxy: BodyProxy,
+    solid: BodySolid,
     volume_m3: f32,
+    has_primitive: bool,
     vertex_count: usize,
     triangle_count: usize,
 ) -> Result<(), WireError> {
@@ -209,14 +214,50 @@ pub(crate) fn check_body_proxy(
             volume_m3,
         });
     }
-    if proxy == BodyProxy::Shape && (vertex_count > 0 || triangle_count > 0) {
-        return Err(WireError::ProxyMeshNotEmpty {
+    if !solid.carries_mesh() && (vertex_count > 0 || triangle_count > 0) {
+        return Err(WireError::SolidMeshNotEmpty {
             object_id,
+            solid: solid.as_str(),
             vertex_count,
             triangle_count,
         });
     }
+    if has_primitive != (solid == BodySolid::Primitive) {
+        return Err(WireError::PrimitiveMismatch {
+            object_id,
+            solid: solid.as_str(),
+            has_primitive,
+        });
+    }
     Ok(())
+}
+
+/// A primitive's sizes are finite and positive (the unused ones 0), its rotation a unit
+/// quaternion, its centre finite and its residual finite and not negative.
+pub(crate) fn check_primitive(object_id: u64, primitive: &BodyPrimitive) -> Result<(), WireError> {
+    let sizes = primitive.shape.sizes();
+    let used = primitive.shape.used_sizes();
+    let good_size = |(k, &size): (usize, &f32)| {
+        if k < used {
+            size.is_finite() && size > 0.0
+        } else {
+            size == 0.0
+        }
+    };
+    if !sizes.iter().enumerate().all(good_size) {
+        return Err(WireError::BadPrimitiveSize {
+            object_id,
+            kind: primitive.shape.name(),
+            sizes,
+        });
+    }
+    check_finite("Body", "primitive rotation", &primitive.rotation.to_array())?;
+    let norm = primitive.rotation.length();
+    if (norm - 1.0).abs() > MAX_QUATERNION_NORM_ERROR {
+        return Err(WireError::NotUnitQuaternion { object_id, norm });
+    }
+    check_finite("Body", "primitive centre", &primitive.centre.to_array())?;
+    check_number("primitive residual_m", primitive.residual_m)
 }
 
 /// At most [`MAX_HULLS`] hulls.
@@ -650,13 +691,17 @@ fn write_body(body: &Body, out: &mut Vec<u8>) -> Result<(), WireError> {
     check_number("margin_m", body.margin_m)?;
     check_finite("Body", "centre_of_mass", &body.centre_of_mass.to_array())?;
     check_finite("Body", "inertia", &inertia)?;
-    check_body_proxy(
+    check_body_solid(
         body.object_id,
-        body.proxy,
+        body.solid,
         body.volume_m3,
+        body.primitive.is_some(),
         body.mesh.vertices.len(),
         body.mesh.triangles.len(),
     )?;
+    if let Some(primitive) = &body.primitive {
+        check_primitive(body.object_id, primitive)?;
+    }
     let compact_box = check_geometry(&body.mesh, body.encoding)?;
     check_hull_count(body.object_id, body.hulls.len())?;
     for (index, hull) in body.hulls.iter().enumerate() {
@@ -665,11 +710,21 @@ fn write_body(body: &Body, out: &mut Vec<u8>) -> Result<(), WireError> {
 
     out.extend_from_slice(&body.object_id.to_le_bytes());
     out.extend_from_slice(&body.shape_version.to_le_bytes());
-    out.push(body.proxy.byte());
+    out.push(body.solid.byte());
     out.extend_from_slice(&body.margin_m.to_le_bytes());
     out.extend_from_slice(&body.volume_m3.to_le_bytes());
     write_f32s(out, &body.centre_of_mass.to_array());
     write_f32s(out, &inertia);
+    match &body.primitive {
+        Some(primitive) => {
+            out.push(primitive.shape.byte());
+            write_f32s(out, &primitive.shape.sizes());
+            write_f32s(out, &primitive.rotation.to_array());
+            write_f32s(out, &primitive.centre.to_array());
+            write_f32s(out, &[primitive.residual_m]);
+        }
+        None => out.extend_from_slice(&[0; PRIMITIVE_BYTES]),
+    }
     write_geometry(&body.mesh, body.encoding, compact_box, out);
     // At most MAX_HULLS, checked; each hull's counts fit their fields, checked.
     out.push(body.hulls.len() as u8);
@@ -796,7 +851,7 @@ mod compact_tests {
         assert_eq!(SHAPE_HEADER_BYTES + BOX_BYTES, 154);
         assert_eq!(SUBSCRIBE_FIXED_BYTES, 11);
         assert_eq!(STATS_HEADER_BYTES, 168);
-        assert_eq!(BODY_HEADER_BYTES, 70);
+        assert_eq!(BODY_HEADER_BYTES, 115);
     }
 
     #[test]

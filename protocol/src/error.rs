@@ -103,13 +103,35 @@ pub enum WireError {
     BodyVolume { object_id: u64, volume_m3: f32 },
 
     #[error(
-        "the body of object {object_id} says its shape is its proxy, yet carries a proxy mesh of \
-         {vertex_count} vertices and {triangle_count} triangles (it must carry none)"
+        "the body of object {object_id} is a {solid}, yet carries a mesh of {vertex_count} \
+         vertices and {triangle_count} triangles (it must carry none)"
     )]
-    ProxyMeshNotEmpty {
+    SolidMeshNotEmpty {
         object_id: u64,
+        solid: &'static str,
         vertex_count: usize,
         triangle_count: usize,
+    },
+
+    #[error(
+        "the body of object {object_id} is a {solid}, yet {}",
+        if *has_primitive { "carries a primitive (only a primitive solid does)" }
+        else { "carries no primitive (kind 0)" }
+    )]
+    PrimitiveMismatch {
+        object_id: u64,
+        solid: &'static str,
+        has_primitive: bool,
+    },
+
+    #[error(
+        "the {kind} primitive of object {object_id}'s body has sizes {sizes:?}: the sizes its \
+         kind uses must be finite and positive, the others 0"
+    )]
+    BadPrimitiveSize {
+        object_id: u64,
+        kind: &'static str,
+        sizes: [f32; 3],
     },
 
     #[error("the body of object {object_id} has {count} hulls, more than the cap of {max}")]

@@ -30,10 +30,11 @@ pub use encode::check_rate;
 pub use encode::encode;
 pub use error::WireError;
 pub use message::{
-    check_hello, quantisation_bound_m, Body, BodyProxy, Encoding, Hull, Kinds, Message, Pose,
-    Sender, Session, Shape, SimplifyStats, StageLatency, Stats, Subscribe, EXTRAPOLATION_REFRESH,
-    EXTRAPOLATION_TOLERANCE_M, EXTRAPOLATION_TOLERANCE_RAD, FIRST_SUPPORT_ID, MAX_FRAME_BYTES,
-    MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES, MAX_RATE_HZ, MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS,
-    MIN_HULL_VERTICES, MIN_RATE_HZ, PROTOCOL_VERSION, SHAPE_CLOSED, SHAPE_NEW_FRAME, SHAPE_SUPPORT,
+    check_hello, quantisation_bound_m, Body, BodyPrimitive, BodySolid, Encoding, Hull, Kinds,
+    Message, Pose, PrimitiveShape, Sender, Session, Shape, SimplifyStats, StageLatency, Stats,
+    Subscribe, EXTRAPOLATION_REFRESH, EXTRAPOLATION_TOLERANCE_M, EXTRAPOLATION_TOLERANCE_RAD,
+    FIRST_SUPPORT_ID, MAX_FRAME_BYTES, MAX_HULLS, MAX_HULL_VERTICES, MAX_NAME_BYTES, MAX_RATE_HZ,
+    MAX_REASON_BYTES, MAX_SUBSCRIBE_IDS, MIN_HULL_VERTICES, MIN_RATE_HZ, PROTOCOL_VERSION,
+    SHAPE_CLOSED, SHAPE_NEW_FRAME, SHAPE_SUPPORT,
 };
 pub use scene::{Scene, SceneChange, SceneObject};

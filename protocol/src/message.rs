@@ -9,8 +9,9 @@ use crate::error::WireError;
 /// read an older server) or a changed layout (see `docs/protocol.md`, "Versioning").
 /// Version 2 put each object's shape in its own frame with a pose, so that a move is a
 /// [`Pose`] of under 100 bytes instead of a whole mesh; version 3 added each object's collision
-/// body ([`Body`]: a closed proxy, convex parts, mass properties).
-pub const PROTOCOL_VERSION: u16 = 3;
+/// body ([`Body`]: a closed proxy, convex parts, mass properties); version 4 made the body
+/// the object's completed solid (a primitive where it is one), its kind `0x0C`.
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// The largest frame either side sends or accepts, counted as the value of the length prefix
 /// (message kind byte plus payload, not the 4 prefix bytes): 64 MiB. A simplified object mesh is
@@ -62,8 +63,8 @@ impl std::fmt::Display for Sender {
     }
 }
 
-/// The kind bytes. Never reuse a retired value: `0x02` (version 1's Upsert) and `0x05`
-/// (version 1's Stats) are retired; `0x80` (version 1's empty Subscribe) is still decoded, so
+/// The kind bytes. Never reuse a retired value: `0x02` (version 1's Upsert), `0x05`
+/// (version 1's Stats) and `0x0B` (version 3's Body) are retired; `0x80` (version 1's empty Subscribe) is still decoded, so
 /// that a server can tell a version-1 client why it is refused.
 pub(crate) mod kind {
     pub const HELLO: u8 = 0x01;
@@ -74,7 +75,7 @@ pub(crate) mod kind {
     pub const SHAPE: u8 = 0x08;
     pub const POSE: u8 = 0x09;
     pub const STATS: u8 = 0x0a;
-    pub const BODY: u8 = 0x0b;
+    pub const BODY: u8 = 0x0c;
     pub const SUBSCRIBE_V1: u8 = 0x80;
     pub const SUBSCRIBE: u8 = 0x81;
 
@@ -436,42 +437,168 @@ impl Shape {
     }
 }
 
-/// How a [`Body`]'s collision proxy was made.
+/// What a [`Body`] is: the solid its mass properties and hulls are of, best first. The first
+/// three are the object completed where it was not seen; the last two are conservative
+/// fallbacks that take in all the space behind what was seen, flagged as such.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum BodyProxy {
-    /// The shape is closed and is its own proxy; the body carries no proxy mesh.
+pub enum BodySolid {
+    /// The shape is closed and is its own solid; the body carries no mesh.
     Shape,
-    /// The open shell swept away from the sensor along its rays to the support plane.
+    /// The object is a primitive ([`Body::primitive`]); the body carries no mesh.
+    Primitive,
+    /// The seen shell closed by the object's symmetry (a mirror plane or an axis of
+    /// revolution), bounded by its support and by space the sensor saw as free.
+    Completed,
+    /// Fallback: the open shell swept away from the sensor along its rays to the support plane.
     ShadowVolume,
-    /// The open shell swept straight down onto the support plane (no sensor position known).
+    /// Fallback: the open shell swept straight down onto the support plane (no sensor position
+    /// known).
     Extrusion,
 }
 
-impl BodyProxy {
+impl BodySolid {
     pub(crate) fn byte(self) -> u8 {
         match self {
-            BodyProxy::Shape => 0,
-            BodyProxy::ShadowVolume => 1,
-            BodyProxy::Extrusion => 2,
+            BodySolid::Shape => 0,
+            BodySolid::Primitive => 1,
+            BodySolid::Completed => 2,
+            BodySolid::ShadowVolume => 3,
+            BodySolid::Extrusion => 4,
         }
     }
 
     pub(crate) fn from_byte(byte: u8) -> Option<Self> {
         match byte {
-            0 => Some(BodyProxy::Shape),
-            1 => Some(BodyProxy::ShadowVolume),
-            2 => Some(BodyProxy::Extrusion),
+            0 => Some(BodySolid::Shape),
+            1 => Some(BodySolid::Primitive),
+            2 => Some(BodySolid::Completed),
+            3 => Some(BodySolid::ShadowVolume),
+            4 => Some(BodySolid::Extrusion),
             _ => None,
         }
     }
 
+    /// Whether the body carries its solid's surface as a mesh (the shape and a primitive need
+    /// none).
+    pub fn carries_mesh(self) -> bool {
+        !matches!(self, BodySolid::Shape | BodySolid::Primitive)
+    }
+
+    /// Whether the solid is a conservative fallback (the shadow volume or the extrusion): its
+    /// mass properties are those of the space behind what was seen, not of the object.
+    pub fn is_fallback(self) -> bool {
+        matches!(self, BodySolid::ShadowVolume | BodySolid::Extrusion)
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
-            BodyProxy::Shape => "shape",
-            BodyProxy::ShadowVolume => "shadow volume",
-            BodyProxy::Extrusion => "extrusion",
+            BodySolid::Shape => "shape",
+            BodySolid::Primitive => "primitive",
+            BodySolid::Completed => "completed solid",
+            BodySolid::ShadowVolume => "shadow volume",
+            BodySolid::Extrusion => "extrusion",
         }
     }
+}
+
+/// The sizes of a [`BodyPrimitive`], in its own frame: a box's sides along x, y, z; a
+/// cylinder's and a capsule's axis along z, centred on the origin; a sphere about the origin.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PrimitiveShape {
+    Box {
+        half_m: glam::Vec3,
+    },
+    Cylinder {
+        radius_m: f32,
+        half_height_m: f32,
+    },
+    Sphere {
+        radius_m: f32,
+    },
+    /// A cylinder of `half_height_m` either side of the origin with a hemisphere on each end
+    /// (MuJoCo's and Bullet's capsule: its whole length is `2 * (half_height_m + radius_m)`).
+    Capsule {
+        radius_m: f32,
+        half_height_m: f32,
+    },
+}
+
+impl PrimitiveShape {
+    pub(crate) fn byte(&self) -> u8 {
+        match self {
+            PrimitiveShape::Box { .. } => 1,
+            PrimitiveShape::Cylinder { .. } => 2,
+            PrimitiveShape::Sphere { .. } => 3,
+            PrimitiveShape::Capsule { .. } => 4,
+        }
+    }
+
+    /// The three size fields of the wire, unused ones 0.
+    pub(crate) fn sizes(&self) -> [f32; 3] {
+        match *self {
+            PrimitiveShape::Box { half_m } => half_m.to_array(),
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            }
+            | PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => [radius_m, half_height_m, 0.0],
+            PrimitiveShape::Sphere { radius_m } => [radius_m, 0.0, 0.0],
+        }
+    }
+
+    /// The shape of a kind byte (1 to 4) and its size fields, or `None` for another byte.
+    pub(crate) fn from_wire(kind: u8, sizes: [f32; 3]) -> Option<Self> {
+        let [a, b, c] = sizes;
+        Some(match kind {
+            1 => PrimitiveShape::Box {
+                half_m: glam::Vec3::new(a, b, c),
+            },
+            2 => PrimitiveShape::Cylinder {
+                radius_m: a,
+                half_height_m: b,
+            },
+            3 => PrimitiveShape::Sphere { radius_m: a },
+            4 => PrimitiveShape::Capsule {
+                radius_m: a,
+                half_height_m: b,
+            },
+            _ => return None,
+        })
+    }
+
+    /// How many of the three size fields the kind uses (the rest are 0 on the wire).
+    pub(crate) fn used_sizes(&self) -> usize {
+        match self {
+            PrimitiveShape::Box { .. } => 3,
+            PrimitiveShape::Cylinder { .. } | PrimitiveShape::Capsule { .. } => 2,
+            PrimitiveShape::Sphere { .. } => 1,
+        }
+    }
+
+    /// A short name: `box`, `cylinder`, `sphere`, `capsule`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PrimitiveShape::Box { .. } => "box",
+            PrimitiveShape::Cylinder { .. } => "cylinder",
+            PrimitiveShape::Sphere { .. } => "sphere",
+            PrimitiveShape::Capsule { .. } => "capsule",
+        }
+    }
+}
+
+/// The primitive an object is ([`BodySolid::Primitive`]), placed in the object's frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyPrimitive {
+    pub shape: PrimitiveShape,
+    /// From the primitive's frame to the object's: a unit quaternion.
+    pub rotation: glam::Quat,
+    /// The primitive's centre, object frame, metres.
+    pub centre: glam::Vec3,
+    /// The 95th percentile of the seen surface's distances from the primitive, metres.
+    pub residual_m: f32,
 }
 
 /// One convex part of a [`Body`]: at most [`MAX_HULL_VERTICES`] vertices (at least
@@ -493,29 +620,32 @@ impl Hull {
 }
 
 /// An object's collision body, made from the shape whose version it names (its vertices are
-/// in that shape's frame, placed by the object's pose): a closed collision proxy, the convex
-/// parts covering it, and its mass properties for a density of 1 kg/m³.
+/// in that shape's frame, placed by the object's pose): the solid a physics engine gives mass
+/// to (the object completed where the sensor did not see it, or a flagged fallback), the
+/// convex parts covering it, and its mass properties for a density of 1 kg/m³.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Body {
     pub object_id: u64,
     /// The version of the shape it was made from.
     pub shape_version: u64,
-    pub proxy: BodyProxy,
-    /// How far the proxy was grown outward from the seen surface, metres.
+    pub solid: BodySolid,
+    /// How far the solid was grown outward from the seen surface, metres.
     pub margin_m: f32,
-    /// The proxy's volume, m³ (positive).
+    /// The solid's volume, m³ (positive).
     pub volume_m3: f32,
-    /// The proxy's centre of mass, object frame.
+    /// The solid's centre of mass, object frame.
     pub centre_of_mass: glam::Vec3,
-    /// The proxy's inertia tensor about its centre of mass, at unit density (kg·m² per kg/m³),
+    /// The solid's inertia tensor about its centre of mass, at unit density (kg·m² per kg/m³),
     /// along the object frame's axes; symmetric (the wire carries its upper triangle).
     pub inertia: [[f32; 3]; 3],
-    /// The proxy's surface, closed, counter-clockwise seen from outside; empty for
-    /// [`BodyProxy::Shape`] (the shape is the proxy).
+    /// The primitive, present exactly when `solid` is [`BodySolid::Primitive`].
+    pub primitive: Option<BodyPrimitive>,
+    /// The solid's surface, closed, counter-clockwise seen from outside; empty for
+    /// [`BodySolid::Shape`] (the shape is the solid) and [`BodySolid::Primitive`].
     pub mesh: TriMesh,
     /// How `mesh` is (to be) laid out on the wire.
     pub encoding: Encoding,
-    /// Convex parts whose union covers the proxy; at most [`MAX_HULLS`].
+    /// Convex parts whose union covers the solid; at most [`MAX_HULLS`].
     pub hulls: Vec<Hull>,
 }
 

@@ -439,7 +439,7 @@ fn hello_golden_bytes() {
     let expected: [u8; 16] = [
         0x0c, 0x00, 0x00, 0x00,                   // length 12
         0x01,                                     // kind Hello
-        0x03, 0x00,                               // protocol_version 3
+        0x04, 0x00,                               // protocol_version 4
         0x07, 0x00,                               // server: 7 bytes
         b't', b'a', b'c', b'm', b'e', b's', b'h', // "tacmesh"
     ];
@@ -818,16 +818,16 @@ fn decoder_skips_a_bad_frame_and_reads_the_next() {
 }
 
 #[test]
-fn check_hello_accepts_version_3_only() {
+fn check_hello_accepts_version_4_only() {
     assert_eq!(check_hello(&Message::hello("tacmesh")), Ok(()));
-    for theirs in [1, 2, 4] {
+    for theirs in [1, 2, 3, 5] {
         let err = check_hello(&Message::Hello {
             protocol_version: theirs,
             server: "other".into(),
         })
         .expect_err("another version");
-        assert_eq!(err, WireError::VersionMismatch { ours: 3, theirs });
-        assert!(err.to_string().contains("speaks only version 3"), "{err}");
+        assert_eq!(err, WireError::VersionMismatch { ours: 4, theirs });
+        assert!(err.to_string().contains("speaks only version 4"), "{err}");
     }
     assert_eq!(
         check_hello(&Message::SnapshotDone),
@@ -900,8 +900,8 @@ fn wire_rejects_empty_frame() {
 
 #[test]
 fn wire_rejects_unknown_and_retired_kinds() {
-    // 0x02 and 0x05 are version 1's Upsert and Stats, retired.
-    for kind in [0x00, 0x02, 0x05, 0x0c, 0x7f, 0x82, 0xff] {
+    // 0x02 and 0x05 are version 1's Upsert and Stats, 0x0b version 3's Body: retired.
+    for kind in [0x00, 0x02, 0x05, 0x0b, 0x0d, 0x7f, 0x82, 0xff] {
         for from in [Sender::Server, Sender::Client] {
             let err = decode_err(&frame(kind, &[1, 2, 3]), from);
             assert_eq!(err, WireError::UnknownKind { kind });

@@ -1370,7 +1370,7 @@ fn body(object_id: u64, version: u64) -> tacmesh_protocol::Body {
     tacmesh_protocol::Body {
         object_id,
         shape_version: version,
-        proxy: tacmesh_protocol::BodyProxy::ShadowVolume,
+        solid: tacmesh_protocol::BodySolid::ShadowVolume,
         margin_m: 0.01,
         volume_m3: 1.0,
         centre_of_mass: Vec3::splat(0.5),
@@ -1379,6 +1379,7 @@ fn body(object_id: u64, version: u64) -> tacmesh_protocol::Body {
             [0.0, 1.0 / 6.0, 0.0],
             [0.0, 0.0, 1.0 / 6.0],
         ],
+        primitive: None,
         mesh: TriMesh::new(
             corners.clone(),
             faces.iter().map(|f| f.map(u32::from)).collect(),

@@ -3,13 +3,17 @@
     python python/examples/mujoco_scene.py --socket /tmp/tacmesh.sock [--seconds 3]
 
 Reads the daemon's scene (the snapshot, then updates for ``--seconds``) and keeps an MJCF model
-of it: each object a mesh geom (which MuJoCo collides as its convex hull) in its own frame, on
-a mocap body placed by the object's pose; the support plane a plane geom through the published
-fan, gravity along its normal toward it. A new shape (or an object coming or going) rebuilds the
-model (MuJoCo compiles a model of a few objects in milliseconds); a Pose only moves its body
-(``data.mocap_pos`` / ``data.mocap_quat``), without a rebuild. At the end it drops a 2 cm
+of it. Each object is a mocap body placed by the object's pose, holding, in the object's frame,
+what its collision body says to collide: an object whose Body is a primitive
+(``BodySolid.PRIMITIVE``) is MuJoCo's native geom of it (a box, a cylinder, a sphere or a
+capsule, at the primitive's centre and rotation), an object with any other Body is its convex
+hulls (a mesh geom each), and an object with no Body yet (or one of no hulls) is its shape (a
+mesh geom, which MuJoCo collides as its convex hull). The support plane is a plane geom through the published fan,
+gravity along its normal toward it. A new shape or body (or an object coming or going) rebuilds
+the model (MuJoCo compiles a model of a few objects in milliseconds); a Pose only moves its
+body (``data.mocap_pos`` / ``data.mocap_quat``), without a rebuild. At the end it drops a 2 cm
 sphere from 30 cm above the top of the largest object and prints where it comes to rest
-against the object's highest point.
+against the highest point of what the object is collided as.
 
 Needs the ``mujoco`` package (``pip install mujoco``) and the client (``pip install ./python``).
 """
@@ -24,10 +28,31 @@ import mujoco  # type: ignore[import-untyped]  # ships no type information
 import numpy as np
 import numpy.typing as npt
 
-from tacmesh import Pose, Scene, SceneObject, Shape, Subscriber
+from tacmesh import (
+    Body,
+    BodySolid,
+    Hull,
+    Mesh,
+    Pose,
+    Primitive,
+    PrimitiveKind,
+    Remove,
+    Scene,
+    SceneObject,
+    Shape,
+    Subscriber,
+)
 
 PROBE_RADIUS_M = 0.02
 DROP_HEIGHT_M = 0.3
+#: MuJoCo's geom of each primitive kind; its ``size`` is the primitive's sizes the kind uses
+#: (a box's half sides; a cylinder's or capsule's radius and half height; a sphere's radius).
+MUJOCO_GEOM = {
+    PrimitiveKind.BOX: "box",
+    PrimitiveKind.CYLINDER: "cylinder",
+    PrimitiveKind.SPHERE: "sphere",
+    PrimitiveKind.CAPSULE: "capsule",
+}
 
 
 @dataclass
@@ -39,9 +64,38 @@ class Support:
     normal: npt.NDArray[np.float64]
 
 
-def meshed(scene: Scene) -> list[SceneObject]:
-    """The objects MuJoCo can make a hull of (supports aside)."""
-    return [o for o in scene.non_supports if len(o.triangles) >= 4]
+def primitive_of(o: SceneObject) -> Primitive | None:
+    """The primitive the object is, if its Body says it is one."""
+    if o.body is not None and o.body.solid is BodySolid.PRIMITIVE:
+        return o.body.primitive
+    return None
+
+
+def hulls_of(o: SceneObject) -> tuple[Hull, ...]:
+    """The convex hulls the object is collided as: its Body's, unless that is a primitive."""
+    if o.body is None or primitive_of(o) is not None:
+        return ()
+    return o.body.hulls
+
+
+def modelled(scene: Scene) -> list[SceneObject]:
+    """The objects the model holds (supports aside): those with a primitive or hulls, and the
+    others (no Body yet, or one of no hulls) whose shape MuJoCo can make a hull of."""
+    return [
+        o
+        for o in scene.non_supports
+        if primitive_of(o) is not None or hulls_of(o) or len(o.triangles) >= 4
+    ]
+
+
+def collided_as(o: SceneObject) -> list[Mesh]:
+    """What the model collides the object as, in the world: its primitive's tessellation, its
+    hulls, or its shape."""
+    if primitive_of(o) is not None and o.world_solid is not None:
+        return [o.world_solid]
+    if hulls_of(o):
+        return list(o.world_hulls)
+    return [o.mesh]
 
 
 def support_of(scene: Scene) -> Support:
@@ -66,26 +120,59 @@ def _numbers(values: npt.ArrayLike) -> str:
     return " ".join(f"{x:.9g}" for x in np.asarray(values, dtype=np.float64).ravel())
 
 
-def mujoco_quat(pose: Pose) -> npt.NDArray[np.float64]:
+def mujoco_quat(rotation: tuple[float, float, float, float]) -> npt.NDArray[np.float64]:
     """MuJoCo's (w, x, y, z) of the wire's (x, y, z, w)."""
-    x, y, z, w = pose.rotation
+    x, y, z, w = rotation
     return np.array([w, x, y, z])
 
 
+def _mesh(name: str, vertices: npt.ArrayLike, triangles: npt.ArrayLike) -> str:
+    return f'    <mesh name="{name}" vertex="{_numbers(vertices)}" face="{_numbers(triangles)}"/>'
+
+
+def assets_of(o: SceneObject) -> list[str]:
+    """The mesh assets of an object's geoms (none for a primitive), object frame."""
+    if primitive_of(o) is not None:
+        return []
+    hulls = hulls_of(o)
+    if hulls:
+        return [
+            _mesh(f"object{o.object_id}_hull{k}", hull.vertices, hull.triangles)
+            for k, hull in enumerate(hulls)
+        ]
+    return [_mesh(f"object{o.object_id}", o.vertices, o.triangles)]
+
+
+def geoms_of(o: SceneObject) -> list[str]:
+    """An object's geoms in its frame: its primitive, its hulls or its shape."""
+    primitive = primitive_of(o)
+    if primitive is not None:
+        size = primitive.sizes[: primitive.kind.used_sizes]
+        return [
+            f'      <geom name="object{o.object_id}" type="{MUJOCO_GEOM[primitive.kind]}" '
+            f'size="{_numbers(size)}" pos="{_numbers(primitive.centre)}" '
+            f'quat="{_numbers(mujoco_quat(primitive.rotation))}"/>'
+        ]
+    hulls = hulls_of(o)
+    if hulls:
+        return [
+            f'      <geom name="object{o.object_id}_hull{k}" type="mesh" '
+            f'mesh="object{o.object_id}_hull{k}"/>'
+            for k in range(len(hulls))
+        ]
+    return [f'      <geom name="object{o.object_id}" type="mesh" mesh="object{o.object_id}"/>']
+
+
 def mjcf_of(scene: Scene, support: Support, probe_at: npt.NDArray[np.float64] | None) -> str:
-    """The scene as MJCF: each object's shape (object frame) as a mesh on a mocap body at its
-    pose, the support as a plane, and a probe."""
-    objects = meshed(scene)
-    assets = "\n".join(
-        f'    <mesh name="object{o.object_id}" vertex="{_numbers(o.vertices)}" '
-        f'face="{_numbers(o.triangles)}"/>'
-        for o in objects
-    )
+    """The scene as MJCF: each object a mocap body at its pose holding its geoms (its
+    primitive, its hulls or its shape, object frame), the support as a plane, and a probe."""
+    objects = modelled(scene)
+    assets = "\n".join(asset for o in objects for asset in assets_of(o))
     bodies = "\n".join(
         f'    <body name="object{o.object_id}" mocap="true" pos="{_numbers(o.pose.translation)}" '
-        f'quat="{_numbers(mujoco_quat(o.pose))}">\n'
-        f'      <geom name="object{o.object_id}" type="mesh" mesh="object{o.object_id}"/>\n'
-        f"    </body>"
+        f'quat="{_numbers(mujoco_quat(o.pose.rotation))}">\n'
+        + "\n".join(geoms_of(o))
+        + "\n    </body>"
         for o in objects
     )
     # MuJoCo's plane is z = 0 of its frame: rotate z onto the support's normal.
@@ -119,28 +206,36 @@ def model_of(scene: Scene, probe_at: npt.NDArray[np.float64] | None = None) -> m
     return mujoco.MjModel.from_xml_string(mjcf_of(scene, support_of(scene), probe_at))
 
 
+def body_version(body: Body | None) -> int | None:
+    """The shape version a Body was made from, None without one."""
+    return None if body is None else body.shape_version
+
+
 class LiveModel:
-    """A MuJoCo model and data kept in step with a scene: rebuilt when the shapes change (an
-    object's new shape version, an object coming or going, another support), the mocap bodies
-    moved when only poses change."""
+    """A MuJoCo model and data kept in step with a scene: rebuilt when the shapes or bodies
+    change (an object's new shape version or new Body, an object coming or going, another
+    support), the mocap bodies moved when only poses change."""
 
     def __init__(self) -> None:
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
         self.rebuilds = 0
         self.moves = 0
-        self._shapes: dict[int, int] = {}
+        #: Per object, its shape's version and its Body's (None without one).
+        self._versions: dict[int, tuple[int, int | None]] = {}
         self._mocap: dict[int, int] = {}
 
     def update(self, scene: Scene) -> bool:
         """Brings the model up to date with ``scene``; True when that took a rebuild."""
-        shapes = {o.object_id: o.shape_version for o in scene.objects.values()}
-        if self.model is None or shapes != self._shapes:
+        versions = {
+            o.object_id: (o.shape_version, body_version(o.body)) for o in scene.objects.values()
+        }
+        if self.model is None or versions != self._versions:
             self.model = model_of(scene)
             self.data = mujoco.MjData(self.model)
-            self._shapes = shapes
+            self._versions = versions
             self._mocap = {}
-            for o in meshed(scene):
+            for o in modelled(scene):
                 body = mujoco.mj_name2id(
                     self.model, mujoco.mjtObj.mjOBJ_BODY, f"object{o.object_id}"
                 )
@@ -152,7 +247,7 @@ class LiveModel:
         for object_id, mocap in self._mocap.items():
             pose = scene.objects[object_id].pose
             self.data.mocap_pos[mocap] = pose.translation
-            self.data.mocap_quat[mocap] = mujoco_quat(pose)
+            self.data.mocap_quat[mocap] = mujoco_quat(pose.rotation)
         mujoco.mj_forward(self.model, self.data)
         self.moves += 1
         return False
@@ -165,7 +260,7 @@ class LiveModel:
 
 
 def largest_object(scene: Scene) -> SceneObject:
-    objects = meshed(scene)
+    objects = modelled(scene)
     if not objects:
         raise ValueError("the daemon has published no object yet")
     return max(objects, key=lambda o: float(np.ptp(o.vertices, axis=0).prod()))
@@ -173,9 +268,10 @@ def largest_object(scene: Scene) -> SceneObject:
 
 def drop_probe(scene: Scene, seconds: float = 1.5) -> tuple[float, float]:
     """Drops the probe over the middle of the largest object's upper part; returns (the probe's
-    resting height above the support, the object's highest point above it), metres."""
+    resting height above the support, the highest point of what the object is collided as
+    above it), metres."""
     support = support_of(scene)
-    target = largest_object(scene).mesh.vertices.astype(np.float64)
+    target = np.vstack([m.vertices for m in collided_as(largest_object(scene))]).astype(np.float64)
     heights = (target - support.point) @ support.normal
     top = float(heights.max())
     # Over the middle of its upper part (a hull's highest vertex is a peak it would roll off).
@@ -202,7 +298,7 @@ def follow(socket: str, seconds: float) -> tuple[Scene, LiveModel]:
             if scene.complete and support_or_none(scene) is not None:
                 if deadline is None:
                     deadline = time.monotonic() + seconds
-                if isinstance(message, (Shape, Pose)) or live.model is None:
+                if isinstance(message, (Shape, Body, Pose, Remove)) or live.model is None:
                     live.update(scene)
             if deadline is not None and time.monotonic() > deadline:
                 break

@@ -1,4 +1,4 @@
-"""A client for the tacmesh daemon (protocol version 3): typed messages with numpy arrays (the
+"""A client for the tacmesh daemon (protocol version 4): typed messages with numpy arrays (the
 objects' shapes, poses and collision bodies), the current scene, reconnection.
 
 See README.md beside this package, and docs/protocol.md in the repository for the wire format.
@@ -22,6 +22,7 @@ from .subscriber import (
     remote_age_s,
     trusted_uids,
 )
+from .tessellation import tessellate
 from .wire import (
     DEFAULT_OPTIONS,
     FIRST_PLANE_ID,
@@ -32,7 +33,7 @@ from .wire import (
     BadBox,
     BadHull,
     Body,
-    BodyProxy,
+    BodySolid,
     CountOverCap,
     EmptyFrame,
     Encoding,
@@ -51,6 +52,8 @@ from .wire import (
     NonFinite,
     NotUnitQuaternion,
     Pose,
+    Primitive,
+    PrimitiveKind,
     ProtocolError,
     Remove,
     Session,
@@ -79,7 +82,7 @@ __all__ = [
     "PROTOCOL_VERSION",
     "SUPPORTED_VERSIONS",
     "Body",
-    "BodyProxy",
+    "BodySolid",
     "Encoding",
     "FrameDecoder",
     "Goodbye",
@@ -89,6 +92,8 @@ __all__ = [
     "Mesh",
     "Message",
     "Pose",
+    "Primitive",
+    "PrimitiveKind",
     "Remove",
     "Scene",
     "SceneObject",
@@ -105,6 +110,7 @@ __all__ = [
     "local_age_s",
     "options_of",
     "remote_age_s",
+    "tessellate",
     "trusted_uids",
     # Errors: the client's ...
     "Refused",

@@ -32,7 +32,7 @@ from .wire import (
     PROTOCOL_VERSION,
     SUPPORTED_VERSIONS,
     Body,
-    BodyProxy,
+    BodySolid,
     Encoding,
     FrameDecoder,
     Goodbye,
@@ -50,6 +50,7 @@ from .wire import (
     WireError,
     encode_subscribe,
 )
+from .tessellation import tessellate
 
 log = logging.getLogger("tacmesh")
 
@@ -177,7 +178,7 @@ def connect(
 
 
 class Mesh(NamedTuple):
-    """A triangle mesh: an object's shape, its body's proxy or one of its hulls."""
+    """A triangle mesh: an object's shape, its body's solid or one of its hulls."""
 
     #: ``float32 (V, 3)``, metres.
     vertices: npt.NDArray[np.float32]
@@ -244,14 +245,19 @@ class SceneObject:
         return Mesh(self.world_vertices, self.shape.triangles)
 
     @cached_property
-    def world_proxy(self) -> Mesh | None:
-        """The body's collision proxy in the world frame (mapped by the current pose), a closed
-        surface; None without a body. For a body whose proxy is its shape (``BodyProxy.SHAPE``)
-        it is the held shape's :attr:`mesh`."""
+    def world_solid(self) -> Mesh | None:
+        """The body's solid in the world frame (mapped by the current pose), a closed surface;
+        None without a body. For a :attr:`~tacmesh.wire.BodySolid.SHAPE` solid it is the held
+        shape's :attr:`mesh`, for a :attr:`~tacmesh.wire.BodySolid.PRIMITIVE` one the
+        primitive's :func:`~tacmesh.tessellation.tessellate` (its vertices on the primitive's
+        surface), for any other the mesh the body carries."""
         if self.body is None:
             return None
-        if self.body.proxy is BodyProxy.SHAPE:
+        if self.body.solid is BodySolid.SHAPE:
             return self.mesh
+        if self.body.solid is BodySolid.PRIMITIVE and self.body.primitive is not None:
+            vertices, triangles = tessellate(self.body.primitive)
+            return Mesh(self.pose.to_world(vertices), triangles)
         return Mesh(self.pose.to_world(self.body.vertices), self.body.triangles)
 
     @cached_property

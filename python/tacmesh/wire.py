@@ -1,4 +1,4 @@
-"""The tacmesh wire protocol, version 3 (docs/protocol.md in the repository): every message
+"""The tacmesh wire protocol, version 4 (docs/protocol.md in the repository): every message
 decoded strictly and encoded.
 
 Every message is one frame: a little-endian ``u32`` length (the kind byte and the payload), a
@@ -13,7 +13,7 @@ document raises a :class:`WireError` subclass naming what is wrong (:class:`Unkn
 Entry points: :class:`FrameDecoder` (bytes in, messages out), :func:`encode` (a message to its
 frame), :func:`encode_subscribe`, and the message dataclasses. Geometry is numpy: vertices
 ``float32 (V, 3)`` in the object's frame, triangles ``uint32 (T, 3)`` (``uint8`` in a Body's
-hulls, as on the wire).
+hulls, as on the wire); a Body's :class:`Primitive` is plain numbers.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 #: The protocol version this module speaks.
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 #: Protocol versions this client reads (a Hello of another version is refused).
 SUPPORTED_VERSIONS = frozenset({PROTOCOL_VERSION})
 
@@ -62,11 +62,15 @@ KIND_SESSION = 0x07
 KIND_SHAPE = 0x08
 KIND_POSE = 0x09
 KIND_STATS = 0x0A
-KIND_BODY = 0x0B
+KIND_BODY = 0x0C
 KIND_SUBSCRIBE_V1 = 0x80
 KIND_SUBSCRIBE = 0x81
-#: Kind numbers of version 1 that version 2 retired; never valid again.
-RETIRED_KINDS = {0x02: "version 1's Upsert", 0x05: "version 1's Stats"}
+#: Kind numbers a later version retired, with what they were; never valid again.
+RETIRED_KINDS = {
+    0x02: "version 1's Upsert",
+    0x05: "version 1's Stats",
+    0x0B: "version 3's Body",
+}
 
 #: Support planes (tables, floors) have ids from here up; objects have ids from 1 below it.
 FIRST_SUPPORT_ID = 1 << 32
@@ -87,7 +91,9 @@ SUBSCRIBE_EXTRAPOLATE = 0x02
 #: Fixed sizes, bytes of payload.
 POSE_BYTES = 92
 SHAPE_HEADER_BYTES = 130
-BODY_HEADER_BYTES = 70
+BODY_HEADER_BYTES = 115
+#: A Body's primitive block: the kind byte, three sizes, the rotation, the centre, the residual.
+PRIMITIVE_BYTES = 1 + 3 * 4 + 4 * 4 + 3 * 4 + 4
 HULL_HEADER_BYTES = 3
 COMPACT_BOX_BYTES = 24
 SUBSCRIBE_HEADER_BYTES = 11
@@ -155,11 +161,12 @@ class InvalidFlags(WireError):
 
 class InvalidEnum(WireError):
     """An enumeration value this document does not define (an encoding other than 0 or 1, a
-    Body's proxy other than 0, 1 or 2)."""
+    Body's solid other than 0 to 4, a primitive kind other than 0 to 4)."""
 
 
 class NonFinite(WireError):
-    """A vertex coordinate, pose, velocity or box that is NaN or infinite."""
+    """A vertex coordinate, pose, velocity or box that is NaN or infinite (a Body's centre of
+    mass, inertia and primitive's rotation and centre included)."""
 
 
 class NotUnitQuaternion(WireError):
@@ -183,8 +190,10 @@ class InvalidNumber(WireError):
 
 
 class BadBody(WireError):
-    """A Body whose volume is not finite and positive, or whose proxy breaks its kind's rule
-    (a ``shape`` proxy that carries a mesh)."""
+    """A Body whose volume is not finite and positive, whose solid breaks its kind's rule (a
+    mesh on a ``shape`` or ``primitive`` solid, a primitive on another solid, none on a
+    ``primitive`` one), whose primitive's sizes are not finite and positive (the sizes its kind
+    does not use exactly 0), or whose absent primitive (kind 0) has a byte that is not 0."""
 
 
 class BadHull(WireError):
@@ -217,15 +226,66 @@ class Kinds(enum.IntFlag):
     ALL = 7
 
 
-class BodyProxy(enum.IntEnum):
-    """How a Body's collision proxy was made."""
+class BodySolid(enum.IntEnum):
+    """What a Body is: the solid its mass properties and hulls are of, best first. The first
+    three are the object completed where it was not seen; the last two are conservative
+    fallbacks that take in all the space behind what was seen (:attr:`is_fallback`)."""
 
-    #: The Shape is closed and is its own proxy; the Body carries no proxy mesh.
+    #: The Shape is closed and is its own solid; the Body carries no mesh.
     SHAPE = 0
-    #: The open shell swept away from the sensor along its rays to the support plane.
-    SHADOW_VOLUME = 1
-    #: The open shell swept straight down onto the support plane (no sensor position known).
-    EXTRUSION = 2
+    #: The object is a primitive (:attr:`Body.primitive`); the Body carries no mesh.
+    PRIMITIVE = 1
+    #: The seen shell closed by the object's symmetry (a mirror plane or an axis of revolution),
+    #: bounded by its support and by space the sensor saw as free.
+    COMPLETED = 2
+    #: Fallback: the open shell swept away from the sensor along its rays to the support plane.
+    SHADOW_VOLUME = 3
+    #: Fallback: the open shell swept straight down onto the support plane (no sensor position
+    #: known).
+    EXTRUSION = 4
+
+    @property
+    def carries_mesh(self) -> bool:
+        """Whether the Body carries the solid's surface as a mesh (the shape and a primitive
+        need none)."""
+        return self not in (BodySolid.SHAPE, BodySolid.PRIMITIVE)
+
+    @property
+    def is_fallback(self) -> bool:
+        """Whether the solid is a conservative fallback (the shadow volume or the extrusion):
+        larger than the object by the unseen space behind it, and so are its mass properties.
+        Treat the object's mass as uncertain."""
+        return self in (BodySolid.SHADOW_VOLUME, BodySolid.EXTRUSION)
+
+    @property
+    def label(self) -> str:
+        """The document's name: ``shape``, ``primitive``, ``completed``, ``shadow volume``,
+        ``extrusion``."""
+        return self.name.lower().replace("_", " ")
+
+
+class PrimitiveKind(enum.IntEnum):
+    """What a Body's :class:`Primitive` is (0 on the wire is no primitive)."""
+
+    #: ``sizes``: half its sides along its own x, y, z.
+    BOX = 1
+    #: ``sizes``: radius, half its height (its axis is its own z), 0.
+    CYLINDER = 2
+    #: ``sizes``: radius, 0, 0.
+    SPHERE = 3
+    #: ``sizes``: radius, half the length of its axis segment (its own z; the whole capsule is
+    #: ``2 · (half + radius)`` long), 0.
+    CAPSULE = 4
+
+    @property
+    def used_sizes(self) -> int:
+        """How many of the three ``sizes`` the kind uses; the rest are 0."""
+        return {
+            PrimitiveKind.BOX: 3,
+            PrimitiveKind.CYLINDER: 2,
+            PrimitiveKind.SPHERE: 1,
+            PrimitiveKind.CAPSULE: 2,
+        }[self]
 
 
 Vec3 = tuple[float, float, float]
@@ -471,6 +531,36 @@ def inertia_terms(
     )
 
 
+@dataclass(frozen=True)
+class Primitive:
+    """The primitive a Body's object is (:attr:`BodySolid.PRIMITIVE`), in the object's frame:
+    what an engine collides as its native geom (MuJoCo's ``size`` is
+    ``sizes[: kind.used_sizes]``, its ``pos`` the ``centre``, its ``quat`` the ``rotation`` as
+    w, x, y, z)."""
+
+    kind: PrimitiveKind
+    #: Metres, by ``kind``: a box's half sides along its own x, y, z; a cylinder's or a
+    #: capsule's radius and half height (of its axis segment, for a capsule), 0; a sphere's
+    #: radius, 0, 0. The sizes the kind uses are finite and > 0, the rest exactly 0.
+    sizes: Vec3
+    #: From the primitive's frame to the object's: a unit quaternion x, y, z, w.
+    rotation: Quat = (0.0, 0.0, 0.0, 1.0)
+    #: The primitive's centre, object frame, metres.
+    centre: Vec3 = (0.0, 0.0, 0.0)
+    #: The 95th percentile of the seen surface's distances from the primitive, metres.
+    residual_m: float = 0.0
+
+    def rotation_matrix(self) -> npt.NDArray[np.float64]:
+        """The rotation as a 3 × 3 matrix (of the quaternion normalised)."""
+        return quaternion_matrix(self.rotation)
+
+    def to_object(self, points: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """Points ``(N, 3)`` of the primitive's frame in the object's frame, float32."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        placed = p @ self.rotation_matrix().T + np.asarray(self.centre, dtype=np.float64)
+        return placed.astype(np.float32)
+
+
 def _empty_vertices() -> npt.NDArray[np.float32]:
     return np.zeros((0, 3), np.float32)
 
@@ -481,36 +571,43 @@ def _empty_triangles() -> npt.NDArray[np.uint32]:
 
 @dataclass(frozen=True, eq=False)
 class Body:
-    """Server → client (0x0B): an object's collision body, made from the Shape whose version it
-    names: a closed collision proxy, the convex hulls covering it and its mass properties at a
-    density of 1 kg/m³. Everything is in the object's frame (that shape's), placed by the
-    object's current pose.
+    """Server → client (0x0C): an object's collision body, made from the Shape whose version it
+    names: the solid a physics engine gives mass to (the object completed where the sensor did
+    not see it, or a flagged fallback: ``solid``), the convex hulls covering it and its mass
+    properties at a density of 1 kg/m³. Everything is in the object's frame (that shape's),
+    placed by the object's current pose.
 
-    For a ``proxy`` of :attr:`BodyProxy.SHAPE` the closed Shape is its own proxy and
-    ``vertices`` and ``triangles`` are empty. A compact Body's proxy is decoded (dequantised)
-    to the same arrays; the hulls are always full precision.
+    A :attr:`BodySolid.SHAPE` solid is the closed Shape itself and a
+    :attr:`BodySolid.PRIMITIVE` one is ``primitive``: for both ``vertices`` and ``triangles``
+    are empty. ``primitive`` is there exactly when ``solid`` is ``PRIMITIVE``. A compact Body's
+    mesh is decoded (dequantised) to the same arrays; the hulls are always full precision.
     """
 
     object_id: int
     #: The version of the shape the body was made from.
     shape_version: int
-    proxy: BodyProxy
-    #: How far the proxy was grown outward from the seen surface, metres (0 for ``SHAPE``).
+    solid: BodySolid
+    #: How far the solid was grown outward from the seen surface, metres (0 for ``SHAPE`` and
+    #: ``PRIMITIVE``).
     margin_m: float
-    #: The proxy's volume, m³, > 0: its mass in kg per kg/m³ of density.
+    #: The solid's volume, m³, > 0: its mass in kg per kg/m³ of density.
     volume_m3: float
-    #: ``float32 (3,)``: the proxy's centre of mass, object frame, metres.
+    #: ``float32 (3,)``: the solid's centre of mass, object frame, metres.
     centre_of_mass: npt.NDArray[np.float32]
     #: ``float32 (3, 3)``, symmetric: the inertia tensor about the centre of mass along the
     #: object frame's axes, kg·m² per kg/m³ (:func:`inertia_matrix` of the wire's six).
     inertia: npt.NDArray[np.float32]
-    #: ``float32 (V, 3)``: the proxy's vertices, object frame (none for ``SHAPE``).
+    #: The primitive the object is, for a ``PRIMITIVE`` solid; None for every other.
+    primitive: Primitive | None = None
+    #: ``float32 (V, 3)``: the solid's vertices, object frame (none for ``SHAPE`` and
+    #: ``PRIMITIVE``).
     vertices: npt.NDArray[np.float32] = field(default_factory=_empty_vertices)
-    #: ``uint32 (T, 3)``: the proxy's triangles, counter-clockwise seen from outside.
+    #: ``uint32 (T, 3)``: the solid's triangles, counter-clockwise seen from outside.
     triangles: npt.NDArray[np.uint32] = field(default_factory=_empty_triangles)
-    #: At most 16 convex parts whose union covers the proxy.
+    #: At most 16 convex parts whose union covers the solid (for a primitive, its tessellation
+    #: grown to contain it).
     hulls: tuple[Hull, ...] = ()
-    #: How the proxy's vertices and triangles are laid out.
+    #: How the solid's vertices and triangles are laid out.
     encoding: Encoding = Encoding.FULL
 
     @property
@@ -981,14 +1078,14 @@ def _read_shape(r: _Reader) -> Shape:
     )
 
 
-def _read_proxy(r: _Reader, what: str) -> BodyProxy:
-    value = r.u8("proxy")
-    if value not in {int(proxy) for proxy in BodyProxy}:
+def _read_solid(r: _Reader, what: str) -> BodySolid:
+    value = r.u8("solid")
+    if value not in {int(solid) for solid in BodySolid}:
         raise InvalidEnum(
-            f"`proxy` of {what} is {value}, which is not a defined value (0 shape, 1 shadow "
-            "volume, 2 extrusion)"
+            f"`solid` of {what} is {value}, which is not a defined value (0 shape, 1 primitive, "
+            "2 completed, 3 shadow volume, 4 extrusion)"
         )
-    return BodyProxy(value)
+    return BodySolid(value)
 
 
 def _check_volume(what: str, volume_m3: float) -> None:
@@ -996,12 +1093,90 @@ def _check_volume(what: str, volume_m3: float) -> None:
         raise BadBody(f"{what} has volume {volume_m3} m³: it must be finite and positive")
 
 
-def _check_proxy_mesh(what: str, proxy: BodyProxy, v: int, t: int) -> None:
-    if proxy is BodyProxy.SHAPE and (v or t):
+def _check_solid_primitive(what: str, solid: BodySolid, has_primitive: bool) -> None:
+    """A primitive is there exactly when the solid is one."""
+    if has_primitive and solid is not BodySolid.PRIMITIVE:
         raise BadBody(
-            f"{what} says its shape is its proxy, yet carries a proxy mesh of {v} vertices and "
-            f"{t} triangles (it must carry none)"
+            f"{what} has solid {int(solid)} ({solid.label}), yet carries a primitive (only "
+            "solid 1, primitive, does)"
         )
+    if not has_primitive and solid is BodySolid.PRIMITIVE:
+        raise BadBody(f"{what} has solid 1 (primitive), yet carries no primitive (kind 0)")
+
+
+def _check_solid_mesh(what: str, solid: BodySolid, v: int, t: int) -> None:
+    """A solid that is the shape or a primitive carries no mesh."""
+    if not solid.carries_mesh and (v or t):
+        raise BadBody(
+            f"{what} has solid {int(solid)} ({solid.label}), yet carries a mesh of {v} vertices "
+            f"and {t} triangles (solids 0, shape, and 1, primitive, carry none)"
+        )
+
+
+def _positive_zero(value: float) -> bool:
+    """Whether ``value`` is 0 with all its bits 0 (not −0)."""
+    return value == 0.0 and math.copysign(1.0, value) > 0.0
+
+
+def _check_primitive(what: str, primitive: Primitive) -> None:
+    """A primitive's kind is defined, the sizes it uses finite and positive and the others
+    exactly 0, its rotation a unit quaternion, its centre finite, its residual finite and not
+    negative."""
+    if int(primitive.kind) not in {int(kind) for kind in PrimitiveKind}:
+        raise InvalidEnum(
+            f"the primitive kind of {what} is {int(primitive.kind)}, which is not a defined "
+            "value (1 box, 2 cylinder, 3 sphere, 4 capsule)"
+        )
+    kind = PrimitiveKind(primitive.kind)
+    sizes = tuple(float(size) for size in primitive.sizes)
+    used = kind.used_sizes
+    good = len(sizes) == 3 and all(
+        (math.isfinite(size) and size > 0.0) if k < used else _positive_zero(size)
+        for k, size in enumerate(sizes)
+    )
+    if not good:
+        raise BadBody(
+            f"the {kind.name.lower()} primitive of {what} has sizes {list(sizes)}: the "
+            f"{used} its kind uses must be finite and positive, the others 0"
+        )
+    _check_finite(what, "primitive rotation", primitive.rotation)
+    norm = math.sqrt(sum(c * c for c in primitive.rotation))
+    if abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
+        raise NotUnitQuaternion(
+            f"the primitive rotation of {what} has norm {norm:.6g}: it must be a unit "
+            f"quaternion (norm within {UNIT_QUATERNION_TOLERANCE:g} of 1)"
+        )
+    _check_finite(what, "primitive centre", primitive.centre)
+    _check_number(what, "primitive residual_m", primitive.residual_m)
+
+
+def _read_primitive(r: _Reader, what: str) -> Primitive | None:
+    """A Body's primitive block: None for kind 0, whose 44 bytes after it must all be 0."""
+    kind = r.u8("primitive kind")
+    raw = r.take(PRIMITIVE_BYTES - 1, "primitive")
+    if kind == 0:
+        if any(raw):
+            at = next(i for i, byte in enumerate(raw) if byte)
+            raise BadBody(
+                f"{what} has no primitive (kind 0), yet byte {62 + at} of its payload is "
+                f"0x{raw[at]:02x}: the 44 bytes after kind 0 must all be 0"
+            )
+        return None
+    if kind not in {int(k) for k in PrimitiveKind}:
+        raise InvalidEnum(
+            f"the primitive kind of {what} is {kind}, which is not a defined value (0 none, "
+            "1 box, 2 cylinder, 3 sphere, 4 capsule)"
+        )
+    values = struct.unpack("<3f4f3ff", raw)
+    primitive = Primitive(
+        kind=PrimitiveKind(kind),
+        sizes=(values[0], values[1], values[2]),
+        rotation=(values[3], values[4], values[5], values[6]),
+        centre=(values[7], values[8], values[9]),
+        residual_m=values[10],
+    )
+    _check_primitive(what, primitive)
+    return primitive
 
 
 def _check_hull_counts(what: str, index: int, n: int, t: int) -> None:
@@ -1034,7 +1209,7 @@ def _read_body(r: _Reader) -> Body:
     object_id = r.u64("object_id")
     shape_version = r.u64("shape_version")
     what = f"the Body of object {object_id}"
-    proxy = _read_proxy(r, what)
+    solid = _read_solid(r, what)
     margin_m = r.f32("margin_m")
     _check_number(what, "margin_m", margin_m)
     volume_m3 = r.f32("volume_m3")
@@ -1043,10 +1218,12 @@ def _read_body(r: _Reader) -> Body:
     _check_finite(what, "centre_of_mass", centre_of_mass)
     inertia: tuple[float, ...] = struct.unpack("<6f", r.take(24, "inertia"))
     _check_finite(what, "inertia", inertia)
+    primitive = _read_primitive(r, what)
+    _check_solid_primitive(what, solid, primitive is not None)
     encoding = _read_encoding(r, what)
     v = r.u32("vertex_count")
     t = r.u32("triangle_count")
-    _check_proxy_mesh(what, proxy, v, t)
+    _check_solid_mesh(what, solid, v, t)
     # The counts are checked against the payload before any array they size is made.
     geometry = _geometry_bytes(encoding, v, t)
     if geometry > r.left:
@@ -1062,11 +1239,12 @@ def _read_body(r: _Reader) -> Body:
     return Body(
         object_id=object_id,
         shape_version=shape_version,
-        proxy=proxy,
+        solid=solid,
         margin_m=margin_m,
         volume_m3=volume_m3,
         centre_of_mass=np.array(centre_of_mass, np.float32),
         inertia=inertia_matrix(*inertia),
+        primitive=primitive,
         vertices=vertices,
         triangles=triangles,
         hulls=hulls,
@@ -1128,8 +1306,8 @@ def decode_payload(kind: int, payload: bytes, sender: Sender = "server") -> AnyM
     if name is None:
         if kind in RETIRED_KINDS:
             raise UnknownKind(
-                f"kind 0x{kind:02x} is retired ({RETIRED_KINDS[kind]}): the peer speaks "
-                "protocol version 1"
+                f"kind 0x{kind:02x} is retired ({RETIRED_KINDS[kind]}): the peer speaks an "
+                f"older protocol version than {PROTOCOL_VERSION}"
             )
         raise UnknownKind(
             f"unknown message kind 0x{kind:02x}: the peer speaks another protocol version or "
@@ -1355,10 +1533,10 @@ def _check_body(
     vertices: npt.NDArray[np.float32],
     triangles: npt.NDArray[Any],
 ) -> None:
-    """What a receiver checks of a Body's fixed fields and proxy mesh, and that its inertia is
-    a symmetric 3 × 3 tensor (the wire carries only its upper triangle)."""
-    if int(body.proxy) not in {int(proxy) for proxy in BodyProxy}:
-        raise InvalidEnum(f"`proxy` of {what} is {int(body.proxy)}")
+    """What a receiver checks of a Body's fixed fields, primitive and mesh, and that its inertia
+    is a symmetric 3 × 3 tensor (the wire carries only its upper triangle)."""
+    if int(body.solid) not in {int(solid) for solid in BodySolid}:
+        raise InvalidEnum(f"`solid` of {what} is {int(body.solid)}")
     if int(body.encoding) not in (0, 1):
         raise InvalidEnum(f"`encoding` of {what} is {int(body.encoding)}")
     _check_number(what, "margin_m", body.margin_m)
@@ -1371,7 +1549,11 @@ def _check_body(
             f"the inertia of {what} is not a symmetric 3 × 3 tensor: {inertia.tolist()}"
         )
     _check_finite(what, "inertia", inertia_terms(inertia))
-    _check_proxy_mesh(what, BodyProxy(body.proxy), len(vertices), len(triangles))
+    if body.primitive is not None:
+        _check_primitive(what, body.primitive)
+    solid = BodySolid(body.solid)
+    _check_solid_primitive(what, solid, body.primitive is not None)
+    _check_solid_mesh(what, solid, len(vertices), len(triangles))
     _check_mesh(what, vertices, triangles)
 
 
@@ -1384,24 +1566,39 @@ def _hull_payload(hull: Hull, what: str, index: int, validate: bool) -> bytes:
     return head + vertices.tobytes() + triangles.astype(np.uint8).tobytes()
 
 
+def _primitive_payload(primitive: Primitive | None) -> bytes:
+    """The primitive block: kind 0 and 44 zero bytes for none."""
+    if primitive is None:
+        return bytes(PRIMITIVE_BYTES)
+    return struct.pack(
+        "<B3f4f3ff",
+        int(primitive.kind),
+        *primitive.sizes,
+        *primitive.rotation,
+        *primitive.centre,
+        primitive.residual_m,
+    )
+
+
 def _body_payload(body: Body, validate: bool) -> bytes:
     what = f"the Body of object {body.object_id}"
     vertices, triangles = _mesh_arrays(body.vertices, body.triangles)
     if validate:
         _check_body(body, what, vertices, triangles)
         _check_hull_count(what, len(body.hulls))
-    head = struct.pack(
-        "<QQBff3f6fBII",
-        body.object_id,
-        body.shape_version,
-        int(body.proxy),
-        body.margin_m,
-        body.volume_m3,
-        *np.asarray(body.centre_of_mass, dtype=np.float64).reshape(3).tolist(),
-        *inertia_terms(body.inertia),
-        int(body.encoding),
-        len(vertices),
-        len(triangles),
+    head = (
+        struct.pack(
+            "<QQBff3f6f",
+            body.object_id,
+            body.shape_version,
+            int(body.solid),
+            body.margin_m,
+            body.volume_m3,
+            *np.asarray(body.centre_of_mass, dtype=np.float64).reshape(3).tolist(),
+            *inertia_terms(body.inertia),
+        )
+        + _primitive_payload(body.primitive)
+        + struct.pack("<BII", int(body.encoding), len(vertices), len(triangles))
     )
     geometry, _ = _geometry_payload(vertices, triangles, body.encoding)
     hulls = b"".join(
@@ -1469,8 +1666,9 @@ def encode(message: AnyMessage, *, validate: bool = True) -> bytes:
     """``message`` as one frame.
 
     A Shape is laid out in its ``encoding``: compact quantises its vertices to the nearest step
-    of their box and adds the quantisation bound to ``max_residual_m``. A Body's proxy mesh is
-    laid out the same way (a Body has no residual), its hulls always in full. With ``validate`` (the
+    of their box and adds the quantisation bound to ``max_residual_m``. A Body's mesh is laid
+    out the same way (a Body's mesh has no residual), its hulls always in full; its primitive
+    block is 45 zero bytes when it has none. With ``validate`` (the
     default) a message a receiver would refuse raises the :class:`WireError` the decoder would;
     without it the bytes are written as they are (for tests of the refusals).
     """

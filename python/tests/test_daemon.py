@@ -21,6 +21,7 @@ import pytest
 
 from tacmesh import (
     PROTOCOL_VERSION,
+    BodySolid,
     Encoding,
     Goodbye,
     Hello,
@@ -29,6 +30,7 @@ from tacmesh import (
     Pose,
     Remove,
     Scene,
+    SceneObject,
     Session,
     Shape,
     SnapshotDone,
@@ -36,8 +38,11 @@ from tacmesh import (
     Subscriber,
     local_age_s,
     remote_age_s,
+    tessellate,
 )
 from tacmesh.wire import FrameDecoder, encode_subscribe_v1
+
+from test_tessellation import surface_distances, volume_of
 
 REPO = Path(__file__).resolve().parents[2]
 #: How long the daemon may take to publish the demo scene's objects after it starts.
@@ -134,7 +139,7 @@ def test_the_demo_scene_fills_with_objects(daemon: Daemon) -> None:
             WARM_UP_S,
         )
     first = seen[0]
-    assert isinstance(first, Hello) and first.protocol_version == PROTOCOL_VERSION == 3, first
+    assert isinstance(first, Hello) and first.protocol_version == PROTOCOL_VERSION == 4, first
     assert isinstance(seen[1], Session)
     scene = sub.scene
     objects, supports = scene.non_supports, scene.supports
@@ -364,6 +369,41 @@ def test_the_rate_cap_spaces_the_updates_of_each_object(daemon: Daemon) -> None:
         assert len(moments) <= 2 * seconds + 2, (object_id, seconds, times)
 
 
+def primitives(scene: Scene) -> list[SceneObject]:
+    """The objects whose held Body is a primitive."""
+    return [
+        o for o in scene.non_supports if o.body is not None and o.body.solid is BodySolid.PRIMITIVE
+    ]
+
+
+def test_an_object_that_is_a_primitive_gets_a_primitive_body_where_its_shape_is(
+    daemon: Daemon,
+) -> None:
+    """The demo's cube, ball and drum can be fitted as primitives (a box, a sphere, a
+    cylinder): at least one such body comes. It is the primitive alone (no mesh), weighs what
+    the primitive's sizes say (a box's are half sides), and its surface, placed by the
+    primitive's rotation and centre, is where the object's shape is."""
+    with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
+        follow(sub, lambda _: sub.scene.complete and bool(primitives(sub.scene)), WARM_UP_S)
+    for o in primitives(sub.scene):
+        body = o.body
+        assert body is not None and body.primitive is not None, o.object_id
+        primitive = body.primitive
+        assert body.vertices.shape == (0, 3) and body.hulls and body.margin_m == 0.0
+        assert not body.solid.is_fallback
+        assert body.volume_m3 == pytest.approx(volume_of(primitive), rel=1e-3), primitive
+        np.testing.assert_allclose(body.centre_of_mass, primitive.centre, atol=1e-5)
+        # The seen surface is within the fit's residual of the primitive, give or take the
+        # shape's own error and a newer shape in the same frame.
+        distances = surface_distances(primitive, o.vertices)
+        assert float(np.percentile(distances, 95)) < 0.015, (primitive, o.max_residual_m)
+        solid = o.world_solid
+        assert solid is not None
+        np.testing.assert_allclose(
+            solid.vertices, o.pose.to_world(tessellate(primitive)[0]), atol=1e-6
+        )
+
+
 def test_stats_have_the_version_2_counters(daemon: Daemon) -> None:
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
         seen = follow(sub, lambda m: isinstance(m, Stats) and sub.scene.complete, WARM_UP_S)
@@ -397,19 +437,19 @@ def read_first_frame(sock: socket.socket) -> bytes:
     return data
 
 
-def test_a_version_1_client_reads_version_3_in_the_frozen_hello(daemon: Daemon) -> None:
+def test_a_version_1_client_reads_version_4_in_the_frozen_hello(daemon: Daemon) -> None:
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(10)
         sock.connect(str(daemon.socket_path))
         data = read_first_frame(sock)
     # What a version-1 client reads of it: length, kind 0x01, u16 version, text.
     length, kind, version, n = struct.unpack_from("<IBHH", data)
-    assert kind == 0x01 and version == 3
+    assert kind == 0x01 and version == 4
     assert data[9 : 9 + n].decode().startswith("tacmesh")
     assert length == 1 + 2 + 2 + n
 
 
-def test_a_version_1_subscribe_gets_a_goodbye_about_version_3(daemon: Daemon) -> None:
+def test_a_version_1_subscribe_gets_a_goodbye_about_version_4(daemon: Daemon) -> None:
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(10)
         sock.connect(str(daemon.socket_path))
@@ -431,7 +471,7 @@ def test_a_version_1_subscribe_gets_a_goodbye_about_version_3(daemon: Daemon) ->
                 if isinstance(message, Goodbye):
                     goodbye = message
     assert goodbye is not None, "no Goodbye"
-    assert "version" in goodbye.reason and "3" in goodbye.reason, goodbye.reason
+    assert "version" in goodbye.reason and "4" in goodbye.reason, goodbye.reason
     assert closed, "the connection stayed open after the Goodbye"
 
 

@@ -24,14 +24,20 @@ import numpy.typing as npt
 import pytest
 
 from tacmesh import (
+    Body,
+    BodySolid,
+    Hull,
     Message,
     Pose,
+    Primitive,
+    PrimitiveKind,
     Scene,
     Session,
     Shape,
     SnapshotDone,
     Stats,
     Subscriber,
+    tessellate,
 )
 from tacmesh.wire import (
     FIRST_SUPPORT_ID,
@@ -39,6 +45,7 @@ from tacmesh.wire import (
     SHAPE_CLOSED,
     SHAPE_SUPPORT,
     Hello,
+    inertia_matrix,
 )
 
 from test_daemon import Daemon, daemon  # noqa: F401  (the fixture)
@@ -161,9 +168,57 @@ def made_up_shapes() -> list[Shape]:
     return shapes
 
 
-def made_up_scene() -> Scene:
+#: Box 1's primitive: a box of 0.2 × 0.4 × 0.2 m turned a quarter about x (its long side
+#: upright), its centre 5 cm above the object frame's origin: its top is 25 cm above the
+#: origin, 10 cm above its shape's, so that a test tells which one is collided.
+BOX_1_PRIMITIVE = Primitive(
+    PrimitiveKind.BOX,
+    (0.1, 0.2, 0.1),
+    rotation=(math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)),
+    centre=(0.0, 0.0, 0.05),
+)
+#: Box 3's hull: a box as wide as its shape and twice as tall (0.1 × 0.2 × 0.2 m), standing on
+#: the table: its top 20 cm above the table, 10 cm above its shape's.
+BOX_3_HULL = tessellate(Primitive(PrimitiveKind.BOX, (0.05, 0.1, 0.1), centre=(0.0, 0.0, 0.05)))
+
+
+def made_up_bodies() -> list[Body]:
+    """Box 1 is a primitive, box 3 a fallback body of one hull, box 2 has no body."""
+    inertia = inertia_matrix(1e-4, 1e-4, 1e-4, 0.0, 0.0, 0.0)
+    vertices, triangles = tessellate(BOX_1_PRIMITIVE)
+    primitive = Body(
+        1,
+        1,
+        BodySolid.PRIMITIVE,
+        0.0,
+        0.016,
+        np.array(BOX_1_PRIMITIVE.centre, np.float32),
+        inertia,
+        primitive=BOX_1_PRIMITIVE,
+        hulls=(Hull(vertices, triangles.astype(np.uint8)),),
+    )
+    vertices, triangles = BOX_3_HULL
+    fallback = Body(
+        3,
+        1,
+        BodySolid.SHADOW_VOLUME,
+        0.0,
+        0.004,
+        np.array([0.0, 0.0, 0.05], np.float32),
+        inertia,
+        vertices=vertices,
+        triangles=triangles,
+        hulls=(Hull(vertices, triangles.astype(np.uint8)),),
+    )
+    return [primitive, fallback]
+
+
+def made_up_scene(bodies: bool = False) -> Scene:
+    """The made-up shapes, and with ``bodies`` the made-up bodies."""
     scene = Scene()
     messages: list[Message] = [Session(1, 2), *made_up_shapes(), SnapshotDone()]
+    if bodies:
+        messages += made_up_bodies()
     for message in messages:
         scene.apply(message)
     return scene
@@ -177,6 +232,54 @@ def test_mujoco_made_up_the_probe_rests_on_the_tallest_box() -> None:
     assert top == pytest.approx(0.3, abs=1e-5)
     assert abs(rest - (top + mujoco_scene.PROBE_RADIUS_M)) < 0.01, (rest, top)
     assert mujoco_scene.model_of(scene).nmesh == 3
+
+
+@needs_mujoco
+def test_mujoco_made_up_bodies_are_collided_as_their_primitive_and_hulls() -> None:
+    mujoco_scene = example("mujoco_scene")
+    mujoco = mujoco_scene.mujoco  # the example's own import
+    scene = made_up_scene(bodies=True)
+    model = mujoco_scene.model_of(scene)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    # Box 1: MuJoCo's box of the primitive's half sides, at its centre and rotation.
+    geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object1")
+    assert model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_BOX
+    np.testing.assert_allclose(model.geom_size[geom], BOX_1_PRIMITIVE.sizes)
+    placed = scene.objects[1].pose
+    np.testing.assert_allclose(
+        data.geom_xpos[geom], placed.to_world(BOX_1_PRIMITIVE.centre)[0], atol=1e-6
+    )
+    turn = placed.rotation_matrix() @ BOX_1_PRIMITIVE.rotation_matrix()
+    np.testing.assert_allclose(data.geom_xmat[geom].reshape(3, 3), turn, atol=1e-6)
+    # Box 3 is its hull, box 2 its shape: two meshes.
+    assert model.nmesh == 2
+    hull = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object3_hull0")
+    assert hull >= 0 and model.geom_type[hull] == mujoco.mjtGeom.mjGEOM_MESH
+    # A ray straight down onto box 3 meets its hull's top (20 cm), not its shape's (10 cm).
+    hit = np.array([-1], np.int32)
+    distance = mujoco.mj_ray(model, data, [0.3, 0.0, 1.0], [0, 0, -1], None, 1, -1, hit)
+    assert hit[0] == hull and distance == pytest.approx(0.8, abs=1e-5)
+    # The probe rests on box 1's primitive, 40 cm up, not on its shape's top at 30 cm.
+    rest, top = mujoco_scene.drop_probe(scene)
+    assert top == pytest.approx(0.4, abs=1e-5)
+    assert abs(rest - (top + mujoco_scene.PROBE_RADIUS_M)) < 0.01, (rest, top)
+
+
+@needs_mujoco
+def test_mujoco_made_up_a_body_arriving_rebuilds_the_model() -> None:
+    mujoco_scene = example("mujoco_scene")
+    scene = made_up_scene()
+    live = mujoco_scene.LiveModel()
+    assert live.update(scene) is True and live.model.nmesh == 3
+    primitive, fallback = made_up_bodies()
+    scene.apply(primitive)
+    assert live.update(scene) is True and live.model.nmesh == 2
+    # The same Body again changes nothing: the bodies are only moved.
+    scene.apply(primitive)
+    assert live.update(scene) is False
+    scene.apply(fallback)
+    assert live.update(scene) is True and (live.rebuilds, live.moves) == (3, 1)
 
 
 @needs_mujoco
@@ -283,12 +386,31 @@ def test_mujoco_a_probe_dropped_on_an_object_rests_on_its_top(daemon: Daemon) ->
     # any tilt, and the cube's one-view mesh can have its far top corner 3 cm low: by 1.5 s
     # the probe had rolled 13 cm across the top and off that corner (1 run in 4 here).
     rest, top = mujoco_scene.drop_probe(scene, seconds=0.6)
-    # The probe's centre rests one radius above the object's top (the hull's top face), not
-    # on the support below it and not inside the object.
+    # The probe's centre rests one radius above the object's top (of its primitive, its hulls
+    # or its shape's hull), not on the support below it and not inside the object.
     assert abs(rest - (top + mujoco_scene.PROBE_RADIUS_M)) < 0.01, (rest, top)
+    # Each object is a mocap body of its primitive's geom, its hulls, or its shape.
+    mujoco = mujoco_scene.mujoco  # the example's own import
     model = mujoco_scene.model_of(scene)
-    objects = sum(not o.is_support and len(o.triangles) >= 4 for o in scene.objects.values())
-    assert model.nmesh == objects >= 3
+    objects = mujoco_scene.modelled(scene)
+    assert len(objects) >= 3
+    assert any(o.body is not None for o in objects), "no body yet"
+    meshes = 0
+    for o in objects:
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"object{o.object_id}")
+        assert body >= 0, o.object_id
+        types = [
+            int(model.geom_type[g]) for g in range(model.ngeom) if model.geom_bodyid[g] == body
+        ]
+        primitive = mujoco_scene.primitive_of(o)
+        if primitive is not None:
+            expected = getattr(mujoco.mjtGeom, f"mjGEOM_{primitive.kind.name}")
+            assert types == [int(expected)], (o.object_id, primitive)
+        else:
+            pieces = len(mujoco_scene.hulls_of(o)) or 1
+            assert types == [int(mujoco.mjtGeom.mjGEOM_MESH)] * pieces, o.object_id
+            meshes += pieces
+    assert model.nmesh == meshes
 
 
 @needs_mujoco
@@ -297,7 +419,7 @@ def test_mujoco_the_live_model_follows_poses_without_rebuilding(daemon: Daemon) 
     scene, live = mujoco_scene.follow(str(daemon.socket_path), 4.0)
     # The cone slides by Poses: the bodies move far more often than the model is rebuilt.
     assert live.moves > 0 and live.rebuilds >= 1, (live.moves, live.rebuilds)
-    for o in mujoco_scene.meshed(scene):
+    for o in mujoco_scene.modelled(scene):
         if o.object_id in live._mocap:
             position, _ = live.body_pose(o.object_id)
             np.testing.assert_allclose(position, o.pose.translation, atol=1e-6)
@@ -354,6 +476,6 @@ def test_without_mujoco_or_rerun_the_examples_tests_are_skipped_naming_the_packa
     )
     output = done.stdout + done.stderr
     assert done.returncode == 0, output
-    assert "6 skipped" in output and "passed" not in output, output
+    assert "8 skipped" in output and "passed" not in output, output
     assert "the mujoco package is not installed (pip install mujoco)" in output, output
     assert "the rerun-sdk package is not installed (pip install rerun-sdk)" in output, output

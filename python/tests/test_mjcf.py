@@ -156,8 +156,8 @@ def test_the_subscribers_scene_of_the_demo_rests_on_its_table(
     model, printed = resting_scene(daemon.socket_path, tmp_path, 200)
     # The demo's objects (the world body is body 0) on its table, a plane.
     assert model.nbody - 1 >= 3, printed
-    # Each object is the daemon's published collision body (protocol 3): its mass is that
-    # body's proxy volume at 500 kg/m³, as `subscribe` printed it last ("volume V l").
+    # Each object is the daemon's published collision body (protocol 4): its mass is that
+    # body's solid's volume at 500 kg/m³, as `subscribe` printed it last ("volume V l").
     volumes_l: dict[int, float] = {}
     for line in printed.splitlines():
         if line.startswith("body object "):

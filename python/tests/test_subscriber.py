@@ -26,7 +26,7 @@ from tacmesh import (
     DEFAULT_OPTIONS,
     PROTOCOL_VERSION,
     Body,
-    BodyProxy,
+    BodySolid,
     Encoding,
     Goodbye,
     Hello,
@@ -85,7 +85,7 @@ def body(object_id: int, version: int = 1) -> Body:
     return Body(
         object_id=object_id,
         shape_version=version,
-        proxy=BodyProxy.SHADOW_VOLUME,
+        solid=BodySolid.SHADOW_VOLUME,
         margin_m=0.0,
         volume_m3=1e-3 / 6,
         centre_of_mass=np.full(3, 0.025, np.float32),
@@ -178,14 +178,15 @@ def test_a_server_of_another_version_is_refused_saying_both_versions(
     sock: Path,
 ) -> None:
     daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(9, "tacmesh 9")))
-    with pytest.raises(VersionMismatch, match=r"version 9.*version 3"):
+    with pytest.raises(VersionMismatch, match=r"version 9.*version 4"):
         next(iter(Subscriber(sock, reconnect=False, timeout_s=5)))
     daemon.join()
 
 
-def test_a_version_2_server_is_refused(sock: Path) -> None:
-    daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(2, "tacmesh 0.1.0")))
-    with pytest.raises(VersionMismatch, match=r"version 2; this client speaks version 3"):
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_server_of_an_earlier_version_is_refused(sock: Path, version: int) -> None:
+    daemon = FakeDaemon(sock, lambda peer: peer.send(Hello(version, "tacmesh 0.1.0")))
+    with pytest.raises(VersionMismatch, match=rf"version {version}; this client speaks version 4"):
         next(iter(Subscriber(sock, reconnect=False, timeout_s=5)))
     daemon.join()
 
@@ -324,10 +325,10 @@ def test_bodies_are_asked_for_by_default_and_kept_beside_their_shapes(
     assert seen == [Hello, Session, Shape, Body, Shape, SnapshotDone, Body, Stats]
     held = sub.scene.objects[1]
     assert held.body is not None and held.body.volume_m3 == pytest.approx(1e-3 / 6)
-    proxy = held.world_proxy
-    assert proxy is not None
+    solid = held.world_solid
+    assert solid is not None
     # The shape's pose, a translation by (1, 0, 0), places the body too.
-    np.testing.assert_allclose(proxy.vertices, held.body.vertices + [1, 0, 0], atol=1e-7)
+    np.testing.assert_allclose(solid.vertices, held.body.vertices + [1, 0, 0], atol=1e-7)
     assert sub.scene.objects[2].body is None and sub.scene.stale == 1
 
 

@@ -1,4 +1,4 @@
-"""The codec against the examples of docs/protocol.md byte for byte (the Body example against
+"""The codec against the examples of docs/protocol.md byte for byte (the Body examples against
 golden bytes computed from its layout table), round trips of every message, the compact
 encoding's bound, every refusal of the document's list, and the scene rules."""
 
@@ -9,6 +9,7 @@ import re
 import struct
 from dataclasses import fields, replace
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +30,7 @@ from tacmesh.wire import (
     BadBox,
     BadHull,
     Body,
-    BodyProxy,
+    BodySolid,
     CountOverCap,
     EmptyFrame,
     Encoding,
@@ -47,6 +48,8 @@ from tacmesh.wire import (
     NonFinite,
     NotUnitQuaternion,
     Pose,
+    Primitive,
+    PrimitiveKind,
     Remove,
     Sender,
     Session,
@@ -70,6 +73,7 @@ from tacmesh.wire import (
     inertia_matrix,
     quantisation_bound_m,
 )
+from tacmesh.tessellation import tessellate
 
 STATS_COUNTERS = [f.name for f in fields(Stats) if f.type == "int"][:19]
 DOC = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
@@ -84,14 +88,19 @@ def one(data: bytes, sender: Sender = "server") -> AnyMessage:
     return message
 
 
+def f32(value: float) -> float:
+    """The value as the wire carries it."""
+    return float(np.float32(value))
+
+
 # ---- the document's examples -----------------------------------------------------------------
 
 
 def test_the_documents_hello() -> None:
-    data = bytes.fromhex("0c000000 01 0200 0700 7461636d657368")
+    data = bytes.fromhex("0c000000 01 0400 0700 7461636d657368")
     assert len(data) == 16
-    assert one(data) == Hello(2, "tacmesh")
-    assert encode(Hello(2, "tacmesh")) == data
+    assert one(data) == Hello(PROTOCOL_VERSION, "tacmesh") == Hello(4, "tacmesh")
+    assert encode(Hello(4, "tacmesh")) == data
 
 
 def test_the_documents_remove_snapshot_done_and_goodbye() -> None:
@@ -241,27 +250,31 @@ def test_the_documents_shape_in_both_encodings() -> None:
     np.testing.assert_array_equal(shape.world_vertices(), [[1, 0, -2], [2, 0, -2], [1, 1, -4]])
 
 
-# ---- the Body example ------------------------------------------------------------------------
+# ---- the Body examples -----------------------------------------------------------------------
 
-#: The Body example of docs/protocol.md, 235 bytes, 16 a row, computed by hand from the
-#: document's layout table. If the reference implementation's golden bytes differ, paste its hex
-#: here (any spacing and line breaks): every test of the example reads it from this constant.
+#: The first Body example of docs/protocol.md (object 7's shadow volume), 280 bytes, 16 a row,
+#: computed by hand from the document's layout table. If the reference implementation's golden
+#: bytes differ, paste its hex here (any spacing and line breaks): every test of the example
+#: reads it from this constant.
 BODY_EXAMPLE_HEX = """
-e7 00 00 00 0b 07 00 00 00 00 00 00 00 02 00 00
-00 00 00 00 00 01 00 00 80 3e ab aa 2a 3e 00 00
+14 01 00 00 0c 07 00 00 00 00 00 00 00 02 00 00
+00 00 00 00 00 03 00 00 80 3e ab aa 2a 3e 00 00
 80 3e 00 00 80 3e 00 00 80 3e cd cc 4c 3c cd cc
 4c 3c cd cc 4c 3c 89 88 08 3b 89 88 08 3b 89 88
-08 3b 00 04 00 00 00 04 00 00 00 00 00 00 00 00
-00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 00
-00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 00
-00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00 02
-00 00 00 01 00 00 00 00 00 00 00 01 00 00 00 03
-00 00 00 01 00 00 00 02 00 00 00 03 00 00 00 00
-00 00 00 03 00 00 00 02 00 00 00 01 04 04 00 00
-00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
-00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
-00 00 00 00 00 00 00 00 00 00 00 00 00 80 3f 00
-02 01 00 01 03 01 02 03 00 03 02
+08 3b 00 00 00 00 00 00 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00
+04 00 00 00 04 00 00 00 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 80 3f 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 80 3f 00 00 00 00 00 00 00 00
+00 00 00 00 00 00 80 3f 00 00 00 00 02 00 00 00
+01 00 00 00 00 00 00 00 01 00 00 00 03 00 00 00
+01 00 00 00 02 00 00 00 03 00 00 00 00 00 00 00
+03 00 00 00 02 00 00 00 01 04 04 00 00 00 00 00
+00 00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00
+00 00 00 00 00 00 00 00 00 00 80 3f 00 00 00 00
+00 00 00 00 00 00 00 00 00 00 80 3f 00 02 01 00
+01 03 01 02 03 00 03 02
 """
 BODY_EXAMPLE = bytes.fromhex("".join(BODY_EXAMPLE_HEX.split()))
 
@@ -270,7 +283,7 @@ TETRAHEDRON_FACES = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], np.ui
 DOC_BODY = Body(
     object_id=7,
     shape_version=2,
-    proxy=BodyProxy.SHADOW_VOLUME,
+    solid=BodySolid.SHADOW_VOLUME,
     margin_m=0.25,
     volume_m3=float(np.float32(1 / 6)),
     centre_of_mass=np.array([0.25, 0.25, 0.25], np.float32),
@@ -280,16 +293,72 @@ DOC_BODY = Body(
     hulls=(Hull(TETRAHEDRON, TETRAHEDRON_FACES.astype(np.uint8)),),
 )
 
+#: The second Body example (object 9, a box primitive): a 0.2 × 0.1 × 0.3 m box standing on
+#: the object frame's origin, turned a quarter about z.
+BOX_HALF_SIDES = (f32(0.1), f32(0.05), f32(0.15))
+QUARTER_TURN_ABOUT_Z = (0.0, 0.0, f32(math.sqrt(0.5)), f32(math.sqrt(0.5)))
+BOX_PRIMITIVE = Primitive(
+    kind=PrimitiveKind.BOX,
+    sizes=BOX_HALF_SIDES,
+    rotation=QUARTER_TURN_ABOUT_Z,
+    centre=(0.0, 0.0, f32(0.15)),
+    residual_m=f32(0.002),
+)
+#: Its hull: the box's corners, as the document lists them (the long side along the object's
+#: y), and its faces, counter-clockwise seen from outside.
+BOX_CORNERS = np.array(
+    [[x, y, z] for z in (0.0, 0.3) for x in (0.05, -0.05) for y in (-0.1, 0.1)], np.float32
+)
+BOX_FACES = np.array(
+    [
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+    ],
+    np.uint8,
+)
+DOC_BOX_BODY = Body(
+    object_id=9,
+    shape_version=4,
+    solid=BodySolid.PRIMITIVE,
+    margin_m=0.0,
+    volume_m3=f32(0.006),
+    centre_of_mass=np.array([0.0, 0.0, 0.15], np.float32),
+    inertia=inertia_matrix(6.5e-5, 5e-5, 2.5e-5, 0.0, 0.0, 0.0),
+    primitive=BOX_PRIMITIVE,
+    hulls=(Hull(BOX_CORNERS, BOX_FACES),),
+)
+
+
+def document_example(caption: str) -> bytes:
+    """The bytes of the document's code block after ``caption``: the hex pairs each of its
+    lines starts with (the annotations after them skipped)."""
+    text = DOC.read_text(encoding="utf-8")
+    block = text[text.index(caption) :].split("```")[1]
+    return b"".join(chunk for line in block.splitlines() if (chunk := leading_hex(line)))
+
+
+BOX_BODY_EXAMPLE = document_example("Example, the body of object 9")
+
 
 def same_body(a: Body, b: Body) -> None:
     """Every field of the two Bodies equal (the arrays element by element)."""
-    assert (a.object_id, a.shape_version, a.proxy, a.encoding) == (
+    assert (a.object_id, a.shape_version, a.solid, a.encoding) == (
         b.object_id,
         b.shape_version,
-        b.proxy,
+        b.solid,
         b.encoding,
     )
-    assert (a.margin_m, a.volume_m3) == (b.margin_m, b.volume_m3)
+    assert (a.margin_m, a.volume_m3, a.primitive) == (b.margin_m, b.volume_m3, b.primitive)
     np.testing.assert_array_equal(a.centre_of_mass, b.centre_of_mass)
     np.testing.assert_array_equal(a.inertia, b.inertia)
     np.testing.assert_array_equal(a.vertices, b.vertices)
@@ -300,37 +369,48 @@ def same_body(a: Body, b: Body) -> None:
         np.testing.assert_array_equal(mine.triangles, theirs.triangles)
 
 
+def check_fields_in_order(frame_bytes: bytes, fields_in_order: list[tuple[str, bytes]]) -> None:
+    """``frame_bytes`` are the fields, one after the other and nothing else: if not, says which
+    field differs."""
+    at = 0
+    for name, expected in fields_in_order:
+        got = frame_bytes[at : at + len(expected)]
+        assert got == expected, f"`{name}` at frame offset {at}: {got.hex(' ')}"
+        at += len(expected)
+    assert at == len(frame_bytes)
+
+
 def test_the_body_example_golden_bytes_follow_the_layout_table() -> None:
     """The golden bytes, rebuilt field by field from the document's table: if a pasted hex
     differs, this says which field."""
     f4 = struct.Struct("<f")
-    fields_in_order = [
-        ("length", struct.pack("<I", 231)),
-        ("kind", b"\x0b"),
-        ("object_id", struct.pack("<Q", 7)),
-        ("shape_version", struct.pack("<Q", 2)),
-        ("proxy", b"\x01"),
-        ("margin_m", f4.pack(0.25)),
-        ("volume_m3", f4.pack(1 / 6)),
-        ("centre_of_mass", struct.pack("<3f", 0.25, 0.25, 0.25)),
-        ("inertia", struct.pack("<6f", *[1 / 80] * 3, *[1 / 480] * 3)),
-        ("encoding", b"\x00"),
-        ("vertex_count", struct.pack("<I", 4)),
-        ("triangle_count", struct.pack("<I", 4)),
-        ("vertices", TETRAHEDRON.astype("<f4").tobytes()),
-        ("triangles", TETRAHEDRON_FACES.astype("<u4").tobytes()),
-        ("hull_count", b"\x01"),
-        ("hull vertex_count", b"\x04"),
-        ("hull triangle_count", struct.pack("<H", 4)),
-        ("hull vertices", TETRAHEDRON.astype("<f4").tobytes()),
-        ("hull triangles", TETRAHEDRON_FACES.astype(np.uint8).tobytes()),
-    ]
-    at = 0
-    for name, expected in fields_in_order:
-        got = BODY_EXAMPLE[at : at + len(expected)]
-        assert got == expected, f"`{name}` at frame offset {at}: {got.hex(' ')}"
-        at += len(expected)
-    assert at == len(BODY_EXAMPLE) == 235
+    check_fields_in_order(
+        BODY_EXAMPLE,
+        [
+            ("length", struct.pack("<I", 276)),
+            ("kind", b"\x0c"),
+            ("object_id", struct.pack("<Q", 7)),
+            ("shape_version", struct.pack("<Q", 2)),
+            ("solid", b"\x03"),
+            ("margin_m", f4.pack(0.25)),
+            ("volume_m3", f4.pack(1 / 6)),
+            ("centre_of_mass", struct.pack("<3f", 0.25, 0.25, 0.25)),
+            ("inertia", struct.pack("<6f", *[1 / 80] * 3, *[1 / 480] * 3)),
+            ("primitive kind", b"\x00"),
+            ("primitive sizes, rotation, centre, residual_m", bytes(44)),
+            ("encoding", b"\x00"),
+            ("vertex_count", struct.pack("<I", 4)),
+            ("triangle_count", struct.pack("<I", 4)),
+            ("vertices", TETRAHEDRON.astype("<f4").tobytes()),
+            ("triangles", TETRAHEDRON_FACES.astype("<u4").tobytes()),
+            ("hull_count", b"\x01"),
+            ("hull vertex_count", b"\x04"),
+            ("hull triangle_count", struct.pack("<H", 4)),
+            ("hull vertices", TETRAHEDRON.astype("<f4").tobytes()),
+            ("hull triangles", TETRAHEDRON_FACES.astype(np.uint8).tobytes()),
+        ],
+    )
+    assert len(BODY_EXAMPLE) == 280
     # The stored values, as the document gives them.
     assert f4.unpack(f4.pack(1 / 6))[0] == pytest.approx(1 / 6, rel=1e-7)
     assert BODY_EXAMPLE[26:30].hex(" ") == "ab aa 2a 3e"
@@ -338,12 +418,47 @@ def test_the_body_example_golden_bytes_follow_the_layout_table() -> None:
     assert BODY_EXAMPLE[54:58].hex(" ") == "89 88 08 3b"  # 1/480
 
 
+def test_the_box_body_examples_bytes_follow_the_layout_table() -> None:
+    """The document's second Body example, field by field from its table."""
+    f4 = struct.Struct("<f")
+    half = math.sqrt(0.5)
+    check_fields_in_order(
+        BOX_BODY_EXAMPLE,
+        [
+            ("length", struct.pack("<I", 252)),
+            ("kind", b"\x0c"),
+            ("object_id", struct.pack("<Q", 9)),
+            ("shape_version", struct.pack("<Q", 4)),
+            ("solid", b"\x01"),
+            ("margin_m", f4.pack(0.0)),
+            ("volume_m3", f4.pack(0.006)),
+            ("centre_of_mass", struct.pack("<3f", 0.0, 0.0, 0.15)),
+            ("inertia", struct.pack("<6f", 6.5e-5, 5e-5, 2.5e-5, 0.0, 0.0, 0.0)),
+            ("primitive kind", b"\x01"),
+            ("primitive sizes", struct.pack("<3f", 0.1, 0.05, 0.15)),
+            ("primitive rotation", struct.pack("<4f", 0.0, 0.0, half, half)),
+            ("primitive centre", struct.pack("<3f", 0.0, 0.0, 0.15)),
+            ("primitive residual_m", f4.pack(0.002)),
+            ("encoding", b"\x00"),
+            ("vertex_count", struct.pack("<I", 0)),
+            ("triangle_count", struct.pack("<I", 0)),
+            ("hull_count", b"\x01"),
+            ("hull vertex_count", b"\x08"),
+            ("hull triangle_count", struct.pack("<H", 12)),
+            ("hull vertices", BOX_CORNERS.astype("<f4").tobytes()),
+            ("hull triangles", BOX_FACES.tobytes()),
+        ],
+    )
+    assert len(BOX_BODY_EXAMPLE) == 256
+
+
 def test_the_body_example_encodes_and_decodes() -> None:
     assert encode(DOC_BODY).hex(" ") == BODY_EXAMPLE.hex(" ")
     body = one(BODY_EXAMPLE)
     assert isinstance(body, Body)
     same_body(body, DOC_BODY)
-    assert body.proxy is BodyProxy.SHADOW_VOLUME and body.encoding is Encoding.FULL
+    assert body.solid is BodySolid.SHADOW_VOLUME and body.encoding is Encoding.FULL
+    assert body.solid.is_fallback and body.primitive is None
     assert body.centre_of_mass.dtype == np.float32 and body.centre_of_mass.shape == (3,)
     assert body.inertia.shape == (3, 3) and np.array_equal(body.inertia, body.inertia.T)
     assert body.inertia_terms == pytest.approx((1 / 80,) * 3 + (1 / 480,) * 3, rel=1e-6)
@@ -352,17 +467,32 @@ def test_the_body_example_encodes_and_decodes() -> None:
     assert hull.vertices.dtype == np.float32 and hull.triangles.dtype == np.uint8
 
 
-def test_the_documents_body_example_is_the_golden_frame() -> None:
-    bodies = [f for f in hex_examples(DOC.read_text(encoding="utf-8")) if f[4] == 0x0B]
-    assert [b.hex(" ") for b in bodies] == [BODY_EXAMPLE.hex(" ")]
+def test_the_documents_box_body_decodes_and_encodes_back_byte_for_byte() -> None:
+    body = one(BOX_BODY_EXAMPLE)
+    assert isinstance(body, Body)
+    same_body(body, DOC_BOX_BODY)
+    assert body.solid is BodySolid.PRIMITIVE and not body.solid.is_fallback
+    assert body.primitive == BOX_PRIMITIVE and body.primitive.kind is PrimitiveKind.BOX
+    assert body.primitive.residual_m == pytest.approx(0.002, rel=1e-7)
+    assert body.vertices.shape == (0, 3) and body.triangles.shape == (0, 3)
+    assert encode(body).hex(" ") == BOX_BODY_EXAMPLE.hex(" ")
+    assert encode(DOC_BOX_BODY).hex(" ") == BOX_BODY_EXAMPLE.hex(" ")
 
 
-def test_the_body_examples_mass_properties_are_the_tetrahedrons() -> None:
-    """Volume, centre of mass and inertia of the example's tetrahedron, by the divergence
-    theorem over its faces: the document's numbers, with ``ixy`` = −∫ x y dV."""
+def test_the_documents_body_examples_are_the_golden_frames() -> None:
+    bodies = [f for f in hex_examples(DOC.read_text(encoding="utf-8")) if f[4] == 0x0C]
+    assert [b.hex(" ") for b in bodies] == [BODY_EXAMPLE.hex(" "), BOX_BODY_EXAMPLE.hex(" ")]
+    assert not [f for f in hex_examples(DOC.read_text(encoding="utf-8")) if f[4] == 0x0B]
+
+
+def mass_properties(
+    vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.unsignedinteger[Any]]
+) -> tuple[float, npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Volume, centre of mass and inertia about it (``ixy`` = −∫ x y dV) of a closed mesh, by
+    the divergence theorem over its faces."""
     volume, first, second = 0.0, np.zeros(3), np.zeros((3, 3))
-    for face in TETRAHEDRON_FACES:
-        a, b, c = (TETRAHEDRON[i].astype(np.float64) for i in face)
+    for face in faces:
+        a, b, c = (vertices[i].astype(np.float64) for i in face)
         # The signed tetrahedron from the origin to the face.
         v = float(np.dot(a, np.cross(b, c))) / 6
         volume += v
@@ -370,18 +500,38 @@ def test_the_body_examples_mass_properties_are_the_tetrahedrons() -> None:
         second += v / 20 * (np.outer(a + b + c, a + b + c) + sum(np.outer(p, p) for p in (a, b, c)))
     centre = first / volume
     about_centre = second - volume * np.outer(centre, centre)
-    inertia = np.trace(about_centre) * np.eye(3) - about_centre
+    return volume, centre, np.trace(about_centre) * np.eye(3) - about_centre
+
+
+def test_the_body_examples_mass_properties_are_the_tetrahedrons() -> None:
+    volume, centre, inertia = mass_properties(TETRAHEDRON, TETRAHEDRON_FACES)
     assert volume == pytest.approx(DOC_BODY.volume_m3, rel=1e-6)
     np.testing.assert_allclose(centre, DOC_BODY.centre_of_mass, rtol=1e-6)
     np.testing.assert_allclose(inertia, DOC_BODY.inertia, rtol=1e-6)
 
 
+def test_the_box_examples_mass_properties_hull_and_primitive_agree() -> None:
+    """The box example's volume, centre and inertia are its primitive's (the quarter turn
+    swaps the box's own x and y moments) and its hull's, and its hull is the primitive's
+    tessellation: the box's corners, closed, counter-clockwise from outside."""
+    a, b, c = (2 * s for s in BOX_HALF_SIDES)
+    volume = a * b * c
+    own = np.diag([b * b + c * c, a * a + c * c, a * a + b * b]) * volume / 12
+    turn = BOX_PRIMITIVE.rotation_matrix()
+    assert volume == pytest.approx(DOC_BOX_BODY.volume_m3, rel=1e-6)
+    np.testing.assert_allclose(turn @ own @ turn.T, DOC_BOX_BODY.inertia, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(BOX_PRIMITIVE.centre, DOC_BOX_BODY.centre_of_mass)
+    (hull,) = DOC_BOX_BODY.hulls
+    hull_volume, hull_centre, hull_inertia = mass_properties(hull.vertices, hull.triangles)
+    assert hull_volume == pytest.approx(volume, rel=1e-6)
+    np.testing.assert_allclose(hull_centre, DOC_BOX_BODY.centre_of_mass, atol=1e-7)
+    np.testing.assert_allclose(hull_inertia, DOC_BOX_BODY.inertia, rtol=1e-5, atol=1e-12)
+    vertices, triangles = tessellate(BOX_PRIMITIVE)
+    np.testing.assert_allclose(vertices, hull.vertices, atol=1e-7)
+    np.testing.assert_array_equal(triangles, hull.triangles)
+
+
 # ---- round trips -----------------------------------------------------------------------------
-
-
-def f32(value: float) -> float:
-    """The value as the wire carries it."""
-    return float(np.float32(value))
 
 
 def a_pose(object_id: int = 7, version: int = 3) -> Pose:
@@ -502,9 +652,9 @@ def test_the_layouts_have_the_documents_sizes() -> None:
     body = a_body()
     v, t = len(body.vertices), len(body.triangles)
     hulls = sum(3 + 12 * len(h.vertices) + 3 * len(h.triangles) for h in body.hulls)
-    assert len(encode(body)) == 5 + 70 + 12 * v + 12 * t + 1 + hulls
+    assert len(encode(body)) == 5 + 115 + 12 * v + 12 * t + 1 + hulls
     compact = replace(body, encoding=Encoding.COMPACT)
-    assert len(encode(compact)) == 5 + 70 + 24 + 6 * v + 6 * t + 1 + hulls
+    assert len(encode(compact)) == 5 + 115 + 24 + 6 * v + 6 * t + 1 + hulls
 
 
 def a_hull(n: int, seed: int) -> Hull:
@@ -518,7 +668,7 @@ def a_hull(n: int, seed: int) -> Hull:
 
 def a_body(
     encoding: Encoding = Encoding.FULL,
-    proxy: BodyProxy = BodyProxy.EXTRUSION,
+    solid: BodySolid = BodySolid.EXTRUSION,
     object_id: int = 7,
     version: int = 3,
 ) -> Body:
@@ -526,7 +676,7 @@ def a_body(
     return Body(
         object_id=object_id,
         shape_version=version,
-        proxy=proxy,
+        solid=solid,
         margin_m=f32(0.002),
         volume_m3=f32(1.5e-3),
         centre_of_mass=np.array([0.01, -0.02, 0.15], np.float32),
@@ -543,11 +693,11 @@ def test_a_full_body_round_trips_exactly() -> None:
     back = one(encode(body))
     assert isinstance(back, Body)
     same_body(back, body)
-    assert back.proxy is BodyProxy.EXTRUSION
+    assert back.solid is BodySolid.EXTRUSION and back.solid.is_fallback
     assert back.inertia_terms == pytest.approx((2e-5, 3e-5, 1.5e-5, -1e-6, 2e-7, 0.0), rel=1e-6)
 
 
-def test_a_compact_body_moves_its_proxy_by_at_most_the_bound_and_its_hulls_not_at_all() -> None:
+def test_a_compact_body_moves_its_solid_by_at_most_the_bound_and_its_hulls_not_at_all() -> None:
     body = a_body(Encoding.COMPACT)
     back = one(encode(body))
     assert isinstance(back, Body) and back.encoding is Encoding.COMPACT
@@ -559,20 +709,84 @@ def test_a_compact_body_moves_its_proxy_by_at_most_the_bound_and_its_hulls_not_a
 
 
 @pytest.mark.parametrize("encoding", list(Encoding), ids=lambda e: e.name.lower())
-def test_a_body_whose_shape_is_its_proxy_carries_no_mesh(encoding: Encoding) -> None:
+def test_a_body_whose_shape_is_its_solid_carries_no_mesh(encoding: Encoding) -> None:
     body = replace(
-        a_body(encoding, BodyProxy.SHAPE),
+        a_body(encoding, BodySolid.SHAPE),
         margin_m=0.0,
         vertices=np.zeros((0, 3), np.float32),
         triangles=np.zeros((0, 3), np.uint32),
     )
     data = encode(body)
     hulls = sum(3 + 12 * len(h.vertices) + 3 * len(h.triangles) for h in body.hulls)
-    assert len(data) == 5 + 70 + (24 if encoding is Encoding.COMPACT else 0) + 1 + hulls
+    assert len(data) == 5 + 115 + (24 if encoding is Encoding.COMPACT else 0) + 1 + hulls
+    assert data[5 + 61 : 5 + 106] == bytes(45), "no primitive: its 45 bytes are 0"
     back = one(data)
-    assert isinstance(back, Body) and back.proxy is BodyProxy.SHAPE
+    assert isinstance(back, Body) and back.solid is BodySolid.SHAPE
     assert back.vertices.shape == (0, 3) and back.triangles.shape == (0, 3)
     same_body(back, body)
+
+
+#: A primitive of each kind: sizes the kind uses, then the unused ones 0.
+PRIMITIVES = [
+    Primitive(
+        PrimitiveKind.BOX,
+        (f32(0.1), f32(0.05), f32(0.15)),
+        QUARTER_TURN_ABOUT_Z,
+        (0.0, 0.0, f32(0.15)),
+        f32(0.002),
+    ),
+    # A lying cylinder: its axis (its own z) turned onto the object's x.
+    Primitive(
+        PrimitiveKind.CYLINDER,
+        (f32(0.04), f32(0.09), 0.0),
+        (0.0, f32(math.sqrt(0.5)), 0.0, f32(math.sqrt(0.5))),
+        (f32(0.01), f32(-0.02), f32(0.04)),
+        f32(0.0015),
+    ),
+    Primitive(PrimitiveKind.SPHERE, (f32(0.1), 0.0, 0.0), centre=(0.0, 0.0, f32(0.1))),
+    Primitive(
+        PrimitiveKind.CAPSULE,
+        (f32(0.03), f32(0.05), 0.0),
+        centre=(0.0, 0.0, f32(0.08)),
+        residual_m=f32(0.001),
+    ),
+]
+
+
+def a_primitive_body(primitive: Primitive, encoding: Encoding = Encoding.FULL) -> Body:
+    """A body that is ``primitive``, its one hull the primitive's tessellation."""
+    vertices, triangles = tessellate(primitive, around=8, rings=4)
+    return Body(
+        object_id=5,
+        shape_version=2,
+        solid=BodySolid.PRIMITIVE,
+        margin_m=0.0,
+        volume_m3=f32(1e-3),
+        centre_of_mass=np.asarray(primitive.centre, np.float32),
+        inertia=inertia_matrix(1e-6, 2e-6, 3e-6, 0.0, 0.0, 0.0),
+        primitive=primitive,
+        hulls=(Hull(vertices, triangles.astype(np.uint8)),),
+        encoding=encoding,
+    )
+
+
+@pytest.mark.parametrize("encoding", list(Encoding), ids=lambda e: e.name.lower())
+@pytest.mark.parametrize("primitive", PRIMITIVES, ids=lambda p: p.kind.name.lower())
+def test_a_primitive_body_of_each_kind_round_trips_exactly(
+    primitive: Primitive, encoding: Encoding
+) -> None:
+    body = a_primitive_body(primitive, encoding)
+    data = encode(body)
+    (hull,) = body.hulls
+    hull_bytes = 3 + 12 * len(hull.vertices) + 3 * len(hull.triangles)
+    assert len(data) == 5 + 115 + (24 if encoding is Encoding.COMPACT else 0) + 1 + hull_bytes
+    assert data[5 + 61] == int(primitive.kind)
+    assert struct.unpack_from("<3f", data, 5 + 62) == primitive.sizes
+    back = one(data)
+    assert isinstance(back, Body)
+    same_body(back, body)
+    assert back.primitive == primitive and back.primitive is not None
+    assert back.primitive.kind is primitive.kind
 
 
 def test_a_body_at_its_caps_round_trips() -> None:
@@ -703,10 +917,11 @@ def test_an_empty_shape_is_valid_in_both_encodings() -> None:
 
 def test_a_message_split_anywhere_comes_out_whole() -> None:
     stream = (
-        encode(Hello(2, "tacmesh"))
+        encode(Hello(4, "tacmesh"))
         + encode(Session(1, 2))
         + encode(a_shape(Encoding.COMPACT, n=20))
         + encode(a_body(Encoding.COMPACT))
+        + BOX_BODY_EXAMPLE
         + encode(a_pose())
         + encode(SnapshotDone())
     )
@@ -716,7 +931,7 @@ def test_a_message_split_anywhere_comes_out_whole() -> None:
         decoder.push(bytes([byte]))
         while (message := decoder.next_message()) is not None:
             out.append(type(message))
-    assert out == [Hello, Session, Shape, Body, Pose, SnapshotDone]
+    assert out == [Hello, Session, Shape, Body, Body, Pose, SnapshotDone]
     assert decoder.buffered == 0
 
 
@@ -761,18 +976,38 @@ COMPACT = encode(a_shape(Encoding.COMPACT, n=10))
 POSE = encode(a_pose())
 # Frame offsets of Shape fields: 5 + the payload offset.
 FLAGS, ENCODING, RESIDUAL, BOX = 5 + 108, 5 + 121, 5 + 117, 5 + 130
-# Frame offsets in the Body example (4 vertices, 4 triangles, full; one hull of 4 and 4).
-B_PROXY, B_MARGIN, B_VOLUME, B_CENTRE, B_INERTIA = (
+# Frame offsets in the Body examples (the first: 4 vertices, 4 triangles, full; one hull of 4
+# and 4).
+B_SOLID, B_MARGIN, B_VOLUME, B_CENTRE, B_INERTIA = (
     5 + 16,
     5 + 17,
     5 + 21,
     5 + 25,
     5 + 37,
 )
-B_ENCODING, B_VERTEX_COUNT, B_VERTICES, B_TRIANGLES = 5 + 61, 5 + 62, 5 + 70, 5 + 118
-B_HULL_COUNT, B_HULL = 5 + 166, 5 + 167
+# The primitive block: its kind, sizes, rotation, centre and residual.
+B_PRIMITIVE, B_SIZES, B_ROTATION, B_PRIMITIVE_CENTRE, B_RESIDUAL = (
+    5 + 61,
+    5 + 62,
+    5 + 74,
+    5 + 90,
+    5 + 102,
+)
+B_ENCODING, B_VERTEX_COUNT, B_VERTICES, B_TRIANGLES = 5 + 106, 5 + 107, 5 + 115, 5 + 163
+B_HULL_COUNT, B_HULL = 5 + 211, 5 + 212
 B_HULL_VERTICES, B_HULL_TRIANGLES = B_HULL + 3, B_HULL + 3 + 48
 COMPACT_BODY = encode(replace(DOC_BODY, encoding=Encoding.COMPACT))
+#: The box example, for short in the refusals below.
+BOX_BODY = BOX_BODY_EXAMPLE
+#: The first Body example as version 3 laid it out, kind 0x0B: no primitive block, and its
+#: shadow volume was proxy 1.
+VERSION_3_BODY = frame(
+    0x0B, BODY_EXAMPLE[5:21] + b"\x01" + BODY_EXAMPLE[22:66] + BODY_EXAMPLE[111:]
+)
+
+
+def f32_bytes(value: float) -> bytes:
+    return struct.pack("<f", value)
 
 
 def unchecked(message: AnyMessage) -> bytes:
@@ -787,6 +1022,8 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("an unknown client kind", frame(0x82, b""), UnknownKind),
     ("version 1's Upsert", frame(0x02, bytes(44)), UnknownKind),
     ("version 1's Stats", frame(0x05, bytes(68)), UnknownKind),
+    ("version 3's Body", VERSION_3_BODY, UnknownKind),
+    ("version 3's Body kind on a version 4 Body", frame(0x0B, BODY_EXAMPLE[5:]), UnknownKind),
     ("a client's Subscribe", encode(DEFAULT_OPTIONS), WrongDirection),
     ("a client's version 1 Subscribe", encode(SubscribeV1()), WrongDirection),
     ("a short Remove", frame(0x03, b"\x01\x02"), Truncated),
@@ -958,11 +1195,12 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         InvalidNumber,
     ),
     # The Body's rules.
-    ("a short Body", frame(0x0B, BODY_EXAMPLE[5:60]), Truncated),
+    ("a short Body", frame(0x0C, BODY_EXAMPLE[5:60]), Truncated),
+    ("a Body cut inside its primitive", frame(0x0C, BOX_BODY[5:90]), Truncated),
     ("a Body cut inside its hull", shorter(BODY_EXAMPLE), Truncated),
     ("a Body longer than its hulls", longer(BODY_EXAMPLE), TrailingBytes),
     (
-        "a Body whose proxy counts exceed its payload",
+        "a Body whose mesh counts exceed its payload",
         patched(BODY_EXAMPLE, B_VERTEX_COUNT, struct.pack("<I", 10**9)),
         Truncated,
     ),
@@ -971,16 +1209,92 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         patched(BODY_EXAMPLE, B_HULL_COUNT, b"\x02"),
         Truncated,
     ),
-    ("a Body proxy not defined", patched(BODY_EXAMPLE, B_PROXY, b"\x03"), InvalidEnum),
+    ("a Body solid not defined", patched(BODY_EXAMPLE, B_SOLID, b"\x05"), InvalidEnum),
     (
         "a Body encoding not defined",
         patched(BODY_EXAMPLE, B_ENCODING, b"\x02"),
         InvalidEnum,
     ),
     (
-        "a shape proxy that carries a mesh",
-        patched(BODY_EXAMPLE, B_PROXY, b"\x00"),
+        "a shape solid that carries a mesh",
+        patched(BODY_EXAMPLE, B_SOLID, b"\x00"),
         BadBody,
+    ),
+    (
+        "a primitive solid that carries a mesh",
+        unchecked(replace(DOC_BOX_BODY, vertices=TETRAHEDRON, triangles=TETRAHEDRON_FACES)),
+        BadBody,
+    ),
+    (
+        "a primitive solid without a primitive",
+        unchecked(replace(DOC_BOX_BODY, primitive=None)),
+        BadBody,
+    ),
+    (
+        "a primitive solid without a primitive, with a mesh",
+        patched(BODY_EXAMPLE, B_SOLID, b"\x01"),
+        BadBody,
+    ),
+    ("a primitive on a shape solid", patched(BOX_BODY, B_SOLID, b"\x00"), BadBody),
+    ("a primitive on a completed solid", patched(BOX_BODY, B_SOLID, b"\x02"), BadBody),
+    ("a primitive on a shadow volume", patched(BOX_BODY, B_SOLID, b"\x03"), BadBody),
+    ("a primitive on an extrusion", patched(BOX_BODY, B_SOLID, b"\x04"), BadBody),
+    ("primitive kind 5", patched(BOX_BODY, B_PRIMITIVE, b"\x05"), InvalidEnum),
+    ("primitive kind 255", patched(BOX_BODY, B_PRIMITIVE, b"\xff"), InvalidEnum),
+    ("no primitive, with a size", patched(BODY_EXAMPLE, B_SIZES, f32_bytes(0.1)), BadBody),
+    ("no primitive, with a −0 size", patched(BODY_EXAMPLE, B_SIZES + 3, b"\x80"), BadBody),
+    (
+        "no primitive, with a rotation",
+        patched(BODY_EXAMPLE, B_ROTATION + 12, f32_bytes(1.0)),
+        BadBody,
+    ),
+    (
+        "no primitive, with its last byte set",
+        patched(BODY_EXAMPLE, B_RESIDUAL + 3, b"\x01"),
+        BadBody,
+    ),
+    ("kind 0 on the box's primitive", patched(BOX_BODY, B_PRIMITIVE, b"\x00"), BadBody),
+    ("a box with a 0 size", patched(BOX_BODY, B_SIZES + 4, f32_bytes(0.0)), BadBody),
+    ("a box with a −0 size", patched(BOX_BODY, B_SIZES + 4, f32_bytes(-0.0)), BadBody),
+    ("a box with a negative size", patched(BOX_BODY, B_SIZES + 8, f32_bytes(-0.1)), BadBody),
+    ("a box with a NaN size", patched(BOX_BODY, B_SIZES, f32_bytes(NAN)), BadBody),
+    ("a box with an infinite size", patched(BOX_BODY, B_SIZES, f32_bytes(INF)), BadBody),
+    # The box's sizes are (0.1, 0.05, 0.15): as another kind, a size it does not use is not 0.
+    ("a cylinder with a third size", patched(BOX_BODY, B_PRIMITIVE, b"\x02"), BadBody),
+    ("a sphere with a second size", patched(BOX_BODY, B_PRIMITIVE, b"\x03"), BadBody),
+    ("a capsule with a third size", patched(BOX_BODY, B_PRIMITIVE, b"\x04"), BadBody),
+    (
+        "a cylinder with a −0 third size",
+        patched(patched(BOX_BODY, B_PRIMITIVE, b"\x02"), B_SIZES + 8, f32_bytes(-0.0)),
+        BadBody,
+    ),
+    (
+        "a primitive rotation of norm 0.87",
+        patched(BOX_BODY, B_ROTATION + 12, f32_bytes(0.5)),
+        NotUnitQuaternion,
+    ),
+    ("a zero primitive rotation", patched(BOX_BODY, B_ROTATION + 8, bytes(8)), NotUnitQuaternion),
+    ("a NaN primitive rotation", patched(BOX_BODY, B_ROTATION, f32_bytes(NAN)), NonFinite),
+    (
+        "a NaN primitive centre",
+        patched(BOX_BODY, B_PRIMITIVE_CENTRE + 8, f32_bytes(NAN)),
+        NonFinite,
+    ),
+    (
+        "an infinite primitive centre",
+        patched(BOX_BODY, B_PRIMITIVE_CENTRE, f32_bytes(-INF)),
+        NonFinite,
+    ),
+    (
+        "a negative primitive residual",
+        patched(BOX_BODY, B_RESIDUAL, f32_bytes(-0.001)),
+        InvalidNumber,
+    ),
+    ("a NaN primitive residual", patched(BOX_BODY, B_RESIDUAL, f32_bytes(NAN)), InvalidNumber),
+    (
+        "an infinite primitive residual",
+        patched(BOX_BODY, B_RESIDUAL, f32_bytes(INF)),
+        InvalidNumber,
     ),
     ("a zero volume", patched(BODY_EXAMPLE, B_VOLUME, struct.pack("<f", 0.0)), BadBody),
     (
@@ -1015,22 +1329,22 @@ REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
         NonFinite,
     ),
     (
-        "a NaN proxy vertex",
+        "a NaN solid vertex",
         patched(BODY_EXAMPLE, B_VERTICES + 12 * 3 + 8, struct.pack("<f", NAN)),
         NonFinite,
     ),
     (
-        "a proxy triangle index out of range",
+        "a solid triangle index out of range",
         patched(BODY_EXAMPLE, B_TRIANGLES + 4, struct.pack("<I", 4)),
         IndexOutOfRange,
     ),
     (
-        "a compact proxy box whose maximum is below its minimum",
+        "a compact solid box whose maximum is below its minimum",
         patched(COMPACT_BODY, B_VERTICES + 12 + 4, struct.pack("<f", -1.0)),
         BadBox,
     ),
     (
-        "a compact proxy's NaN box",
+        "a compact solid's NaN box",
         patched(COMPACT_BODY, B_VERTICES, struct.pack("<f", NAN)),
         NonFinite,
     ),
@@ -1069,6 +1383,7 @@ def test_a_frame_that_breaks_the_rules_is_refused(
 CLIENT_REFUSALS: list[tuple[str, bytes, type[WireError]]] = [
     ("a server's Hello", encode(Hello(2, "x")), WrongDirection),
     ("a server's Body", BODY_EXAMPLE, WrongDirection),
+    ("a server's box Body", BOX_BODY, WrongDirection),
     ("a Subscribe over its length", longer(encode(DEFAULT_OPTIONS)), TrailingBytes),
     ("a short Subscribe", shorter(encode(DEFAULT_OPTIONS)), Truncated),
     ("a version 1 Subscribe with a payload", frame(0x80, b"\x00"), TrailingBytes),
@@ -1153,7 +1468,54 @@ def test_last_seen_may_equal_the_pose_time() -> None:
         (Subscribe(kinds=Kinds(0)), InvalidFlags),
         (Subscribe(kinds=Kinds.BODIES), InvalidFlags),
         (replace(DOC_BODY, volume_m3=0.0), BadBody),
-        (replace(DOC_BODY, proxy=BodyProxy.SHAPE), BadBody),
+        (replace(DOC_BODY, solid=BodySolid.SHAPE), BadBody),
+        (replace(DOC_BODY, solid=cast(BodySolid, 5)), InvalidEnum),
+        (replace(DOC_BODY, solid=BodySolid.PRIMITIVE), BadBody),
+        (replace(DOC_BODY, primitive=BOX_PRIMITIVE), BadBody),
+        (replace(DOC_BOX_BODY, primitive=None), BadBody),
+        (replace(DOC_BOX_BODY, vertices=TETRAHEDRON, triangles=TETRAHEDRON_FACES), BadBody),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, kind=cast(PrimitiveKind, 0))),
+            InvalidEnum,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, kind=cast(PrimitiveKind, 5))),
+            InvalidEnum,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, sizes=(0.1, 0.0, 0.15))),
+            BadBody,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, kind=PrimitiveKind.CYLINDER)),
+            BadBody,
+        ),
+        (
+            replace(
+                DOC_BOX_BODY,
+                primitive=Primitive(PrimitiveKind.SPHERE, (-1.0, 0.0, 0.0)),
+            ),
+            BadBody,
+        ),
+        (
+            replace(
+                DOC_BOX_BODY,
+                primitive=Primitive(PrimitiveKind.SPHERE, (0.1, -0.0, 0.0)),
+            ),
+            BadBody,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, rotation=(0.0, 0.0, 0.0, 2.0))),
+            NotUnitQuaternion,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, centre=(0.0, NAN, 0.0))),
+            NonFinite,
+        ),
+        (
+            replace(DOC_BOX_BODY, primitive=replace(BOX_PRIMITIVE, residual_m=-0.001)),
+            InvalidNumber,
+        ),
         (replace(DOC_BODY, margin_m=-0.25), InvalidNumber),
         (
             replace(DOC_BODY, centre_of_mass=np.array([0, NAN, 0], np.float32)),
@@ -1303,10 +1665,13 @@ def test_the_world_mesh_follows_the_pose() -> None:
     np.testing.assert_array_equal(scene.objects[1].vertices, shape.vertices)
 
 
-def body_of(object_id: int, version: int, proxy: BodyProxy = BodyProxy.SHADOW_VOLUME) -> Body:
-    """The document's Body example, of another object and shape version."""
-    body = replace(DOC_BODY, object_id=object_id, shape_version=version, proxy=proxy)
-    if proxy is BodyProxy.SHAPE:
+def body_of(object_id: int, version: int, solid: BodySolid = BodySolid.SHADOW_VOLUME) -> Body:
+    """The document's first Body example (its second for a primitive), of another object and
+    shape version."""
+    if solid is BodySolid.PRIMITIVE:
+        return replace(DOC_BOX_BODY, object_id=object_id, shape_version=version)
+    body = replace(DOC_BODY, object_id=object_id, shape_version=version, solid=solid)
+    if solid is BodySolid.SHAPE:
         body = replace(
             body,
             vertices=np.zeros((0, 3), np.float32),
@@ -1318,7 +1683,7 @@ def body_of(object_id: int, version: int, proxy: BodyProxy = BodyProxy.SHADOW_VO
 def test_a_body_is_kept_beside_its_shape_and_placed_by_the_current_pose() -> None:
     scene = Scene()
     scene.apply(shape_of(1, 1, pose_time_ns=10))
-    assert scene.objects[1].body is None and scene.objects[1].world_proxy is None
+    assert scene.objects[1].body is None and scene.objects[1].world_solid is None
     assert scene.objects[1].world_hulls == () and scene.objects[1].world_centre_of_mass is None
     body = body_of(1, 1)
     scene.apply(body)
@@ -1334,10 +1699,10 @@ def test_a_body_is_kept_beside_its_shape_and_placed_by_the_current_pose() -> Non
     held = scene.objects[1]
     assert held.body is body and held.pose_time_ns == 20
     expected = TETRAHEDRON * [1, -1, -1] + [1, 2, 3]
-    proxy = held.world_proxy
-    assert proxy is not None and proxy.vertices.dtype == np.float32
-    np.testing.assert_allclose(proxy.vertices, expected, atol=1e-6)
-    np.testing.assert_array_equal(proxy.triangles, TETRAHEDRON_FACES)
+    solid = held.world_solid
+    assert solid is not None and solid.vertices.dtype == np.float32
+    np.testing.assert_allclose(solid.vertices, expected, atol=1e-6)
+    np.testing.assert_array_equal(solid.triangles, TETRAHEDRON_FACES)
     (hull,) = held.world_hulls
     np.testing.assert_allclose(hull.vertices, expected, atol=1e-6)
     assert hull.triangles.dtype == np.uint32
@@ -1345,19 +1710,70 @@ def test_a_body_is_kept_beside_its_shape_and_placed_by_the_current_pose() -> Non
     centre = held.world_centre_of_mass
     assert centre is not None
     np.testing.assert_allclose(centre, [1.25, 1.75, 2.75], atol=1e-6)
-    # The object frame's proxy stays as sent.
+    # The object frame's solid stays as sent.
     np.testing.assert_array_equal(body.vertices, TETRAHEDRON)
 
 
-def test_a_body_whose_proxy_is_its_shape_is_the_shape_in_the_world() -> None:
+def test_a_body_whose_solid_is_its_shape_is_the_shape_in_the_world() -> None:
     scene = Scene()
     scene.apply(shape_of(1, 1, flags=SHAPE_CLOSED))
-    scene.apply(body_of(1, 1, BodyProxy.SHAPE))
+    scene.apply(body_of(1, 1, BodySolid.SHAPE))
     held = scene.objects[1]
-    proxy = held.world_proxy
-    assert proxy is not None
-    np.testing.assert_array_equal(proxy.vertices, held.mesh.vertices)
-    np.testing.assert_array_equal(proxy.triangles, held.shape.triangles)
+    solid = held.world_solid
+    assert solid is not None
+    np.testing.assert_array_equal(solid.vertices, held.mesh.vertices)
+    np.testing.assert_array_equal(solid.triangles, held.shape.triangles)
+
+
+def test_a_primitive_body_is_its_primitives_tessellation_in_the_world() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1))
+    scene.apply(body_of(1, 1, BodySolid.PRIMITIVE))
+    # Half a turn about x, then (1, 2, 3).
+    scene.apply(
+        replace(pose_of(1, 1, 20), rotation=(1.0, 0.0, 0.0, 0.0), translation=(1.0, 2.0, 3.0))
+    )
+    held = scene.objects[1]
+    solid = held.world_solid
+    assert solid is not None and solid.vertices.dtype == np.float32
+    # The box example's primitive is 8 corners, the same as its hull: both placed by the pose.
+    expected = BOX_CORNERS * [1, -1, -1] + [1, 2, 3]
+    np.testing.assert_allclose(solid.vertices, expected, atol=1e-6)
+    np.testing.assert_array_equal(solid.triangles, BOX_FACES)
+    (hull,) = held.world_hulls
+    np.testing.assert_allclose(hull.vertices, expected, atol=1e-6)
+    centre = held.world_centre_of_mass
+    assert centre is not None
+    np.testing.assert_allclose(centre, [1.0, 2.0, 2.85], atol=1e-6)
+
+
+def test_a_round_primitive_body_is_a_closed_mesh_on_its_surface_in_the_world() -> None:
+    scene = Scene()
+    scene.apply(shape_of(1, 1))
+    cylinder = PRIMITIVES[1]
+    scene.apply(replace(a_primitive_body(cylinder), object_id=1, shape_version=1))
+    held = scene.objects[1]
+    solid = held.world_solid
+    assert solid is not None
+    vertices, triangles = tessellate(cylinder)
+    np.testing.assert_allclose(solid.vertices, held.pose.to_world(vertices), atol=1e-7)
+    np.testing.assert_array_equal(solid.triangles, triangles)
+    # In the primitive's frame every vertex is on the cylinder: radius 4 cm, within 9 cm of
+    # its middle along its axis.
+    turn = cylinder.rotation_matrix()
+    own = (vertices.astype(np.float64) - cylinder.centre) @ turn
+    radial = np.linalg.norm(own[:, :2], axis=1)
+    on_side = np.isclose(radial, 0.04, atol=1e-6)
+    on_cap = np.isclose(np.abs(own[:, 2]), 0.09, atol=1e-6)
+    assert np.all(on_side | on_cap) and np.all(radial <= 0.04 + 1e-6)
+
+
+def test_only_the_shadow_volume_and_the_extrusion_are_fallbacks() -> None:
+    assert [s.is_fallback for s in BodySolid] == [False, False, False, True, True]
+    assert [s.carries_mesh for s in BodySolid] == [False, False, True, True, True]
+    assert [int(s) for s in BodySolid] == [0, 1, 2, 3, 4]
+    assert [int(k) for k in PrimitiveKind] == [1, 2, 3, 4]
+    assert [k.used_sizes for k in PrimitiveKind] == [3, 2, 1, 2]
 
 
 def test_a_body_of_an_object_not_held_is_stale() -> None:

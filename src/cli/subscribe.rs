@@ -565,12 +565,42 @@ fn describe_shape(shape: &Shape, age: Duration) -> String {
     )
 }
 
-/// One line for a Body: what its proxy is, its hulls and its volume.
+/// One line for a Body: what its solid is, its hulls and its volume.
 fn describe_body(body: &tacmesh::protocol::Body) -> String {
+    use tacmesh::protocol::{BodySolid, PrimitiveShape};
     let vertices: usize = body.hulls.iter().map(|h| h.vertices.len()).sum();
-    let proxy = match body.proxy {
-        tacmesh::protocol::BodyProxy::Shape => "the shape itself".to_owned(),
-        other => format!(
+    let solid = match (body.solid, &body.primitive) {
+        (BodySolid::Shape, _) => "the shape itself".to_owned(),
+        (BodySolid::Primitive, Some(p)) => {
+            let mm = |m: f32| m * 1e3;
+            let sizes = match p.shape {
+                PrimitiveShape::Box { half_m } => format!(
+                    "{:.0} × {:.0} × {:.0} mm",
+                    mm(2.0 * half_m.x),
+                    mm(2.0 * half_m.y),
+                    mm(2.0 * half_m.z)
+                ),
+                PrimitiveShape::Cylinder {
+                    radius_m,
+                    half_height_m,
+                }
+                | PrimitiveShape::Capsule {
+                    radius_m,
+                    half_height_m,
+                } => format!(
+                    "radius {:.0} mm, axis {:.0} mm",
+                    mm(radius_m),
+                    mm(2.0 * half_height_m)
+                ),
+                PrimitiveShape::Sphere { radius_m } => format!("radius {:.0} mm", mm(radius_m)),
+            };
+            format!(
+                "a {} ({sizes}, seen within {:.1} mm)",
+                p.shape.name(),
+                mm(p.residual_m)
+            )
+        }
+        (other, _) => format!(
             "{} of {} faces, grown {:.1} mm",
             other.as_str(),
             body.mesh.triangles.len(),
@@ -578,7 +608,7 @@ fn describe_body(body: &tacmesh::protocol::Body) -> String {
         ),
     };
     format!(
-        "body {} shape {}: proxy {proxy}, {} convex hulls ({vertices} vertices), volume {:.2} l",
+        "body {} shape {}: {solid}, {} convex hulls ({vertices} vertices), volume {:.2} l",
         Id(body.object_id),
         body.shape_version,
         body.hulls.len(),

@@ -1,17 +1,19 @@
-//! The bodies worker: turns each published object shape into its collision body (a closed
-//! proxy, convex parts, mass properties: docs/protocol.md, "Body") and publishes it, off the
-//! mesher's thread. The proxy of a one-view shell is its shadow volume along the sensor's rays
-//! to the support it stands on; its convex decomposition runs in a child process
-//! ([`crate::isolated_vhacd`]) so that a panic inside parry's V-HACD cannot abort the daemon.
+//! The bodies worker: turns each published object shape into its collision body (the object's
+//! solid, convex parts, mass properties: docs/protocol.md, "Body") and publishes it, off the
+//! mesher's thread. An object that is a primitive (a box, a cylinder, a sphere, a capsule
+//! fitted to its shape) is that primitive, whole; otherwise the solid of a one-view shell is
+//! its shadow volume along the sensor's rays to the support it stands on, flagged as a
+//! fallback, and its convex decomposition runs in a child process ([`crate::isolated_vhacd`])
+//! so that a panic inside parry's V-HACD cannot abort the daemon.
 
 use std::time::Instant;
 
 use glam::Vec3;
 use tacmesh_physics::{
-    collision_proxy, convex_parts_with, ConvexConfig, MassProperties, ProxyConfig, ProxyKind,
-    SupportPlane,
+    collision_proxy, convex_parts_with, primitive_of_shape, ConvexConfig, MassProperties,
+    Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
 };
-use tacmesh_protocol::{Body, BodyProxy, Encoding, Hull};
+use tacmesh_protocol::{Body, BodyPrimitive, BodySolid, Encoding, Hull};
 use tacmesh_source::TriMesh;
 
 use super::counters::{Counters, Stage};
@@ -108,7 +110,7 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
                     "object {} (shape {}): {} body of {} hulls, {:.4} m³, in {:.1} ms",
                     job.object_id,
                     job.shape_version,
-                    body.proxy.as_str(),
+                    body.solid.as_str(),
                     body.hulls.len(),
                     body.volume_m3,
                     started.elapsed().as_secs_f64() * 1e3
@@ -128,8 +130,71 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
     heartbeat.retire();
 }
 
-/// The body of one shape; `decompose` is the V-HACD step (see
-/// [`tacmesh_physics::convex_parts_with`]).
+/// A physics primitive as the wire carries it.
+pub fn wire_primitive(primitive: &Primitive) -> BodyPrimitive {
+    use tacmesh_protocol::PrimitiveShape as Wire;
+    BodyPrimitive {
+        shape: match primitive.shape {
+            PrimitiveShape::Box { half_m } => Wire::Box { half_m },
+            PrimitiveShape::Cylinder {
+                radius_m,
+                half_height_m,
+            } => Wire::Cylinder {
+                radius_m,
+                half_height_m,
+            },
+            PrimitiveShape::Sphere { radius_m } => Wire::Sphere { radius_m },
+            PrimitiveShape::Capsule {
+                radius_m,
+                half_height_m,
+            } => Wire::Capsule {
+                radius_m,
+                half_height_m,
+            },
+        },
+        rotation: primitive.rotation.normalize(),
+        centre: primitive.centre,
+        residual_m: primitive.residual_m,
+    }
+}
+
+/// A convex mesh as a hull of the wire, if it is small enough for one.
+fn wire_hull(vertices: &[Vec3], triangles: &[[u32; 3]]) -> Result<Hull, BodyError> {
+    if vertices.len() > tacmesh_protocol::MAX_HULL_VERTICES {
+        return Err(BodyError::HullTooLarge {
+            vertices: vertices.len(),
+            max: tacmesh_protocol::MAX_HULL_VERTICES,
+        });
+    }
+    Ok(Hull {
+        vertices: vertices.to_vec(),
+        // Below the vertex count, checked just above, so each fits in a byte.
+        triangles: triangles.iter().map(|t| t.map(|i| i as u8)).collect(),
+    })
+}
+
+/// The body of a shape that is a primitive: the primitive whole, its mass properties, and its
+/// covering tessellation as the one hull.
+fn primitive_body(job: &BodyJob, primitive: &Primitive) -> Result<Body, BodyError> {
+    let mass = primitive.mass();
+    let cover = primitive.covering_mesh();
+    Ok(Body {
+        object_id: job.object_id,
+        shape_version: job.shape_version,
+        solid: BodySolid::Primitive,
+        margin_m: 0.0,
+        volume_m3: mass.volume_m3,
+        centre_of_mass: mass.centre_of_mass,
+        inertia: mass.inertia,
+        primitive: Some(wire_primitive(primitive)),
+        mesh: TriMesh::default(),
+        encoding: Encoding::Full,
+        hulls: vec![wire_hull(&cover.vertices, &cover.triangles)?],
+    })
+}
+
+/// The body of one shape: the primitive it is, if one explains it; else its closed proxy
+/// decomposed by `decompose`, the V-HACD step (see [`tacmesh_physics::convex_parts_with`]).
 pub fn make_body(
     job: &BodyJob,
     decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
@@ -146,40 +211,37 @@ pub fn make_body(
     if !proxy.closed {
         return Err(BodyError::NotClosed { kind: proxy.kind });
     }
+    // The proxy holds the object: a primitive must lie within it.
+    if let Some(primitive) =
+        primitive_of_shape(&job.mesh_in_object, job.support, job.margin_m, &proxy.mesh)
+    {
+        if primitive.mass().implausible().is_none() {
+            return primitive_body(job, &primitive);
+        }
+    }
     let mass = MassProperties::of_closed_mesh(&proxy.mesh)?;
     let parts = convex_parts_with(&proxy.mesh, &ConvexConfig::default(), decompose)?;
     let hulls = parts
         .hulls
         .iter()
-        .map(|hull| {
-            if hull.vertices.len() > tacmesh_protocol::MAX_HULL_VERTICES {
-                return Err(BodyError::HullTooLarge {
-                    vertices: hull.vertices.len(),
-                    max: tacmesh_protocol::MAX_HULL_VERTICES,
-                });
-            }
-            Ok(Hull {
-                vertices: hull.vertices.clone(),
-                // Below the vertex count, checked just above, so each fits in a byte.
-                triangles: hull.triangles.iter().map(|t| t.map(|i| i as u8)).collect(),
-            })
-        })
+        .map(|hull| wire_hull(&hull.vertices, &hull.triangles))
         .collect::<Result<Vec<_>, _>>()?;
-    let (proxy_kind, mesh, margin_m) = match proxy.kind {
+    let (solid, mesh, margin_m) = match proxy.kind {
         // The shape itself: nothing to repeat on the wire.
-        ProxyKind::Surface => (BodyProxy::Shape, TriMesh::default(), 0.0),
-        ProxyKind::ShadowVolume => (BodyProxy::ShadowVolume, proxy.mesh, job.margin_m),
-        ProxyKind::Extrusion => (BodyProxy::Extrusion, proxy.mesh, job.margin_m),
+        ProxyKind::Surface => (BodySolid::Shape, TriMesh::default(), 0.0),
+        ProxyKind::ShadowVolume => (BodySolid::ShadowVolume, proxy.mesh, job.margin_m),
+        ProxyKind::Extrusion => (BodySolid::Extrusion, proxy.mesh, job.margin_m),
         ProxyKind::OpenShell => return Err(BodyError::NotClosed { kind: proxy.kind }),
     };
     Ok(Body {
         object_id: job.object_id,
         shape_version: job.shape_version,
-        proxy: proxy_kind,
+        solid,
         margin_m,
         volume_m3: mass.volume_m3,
         centre_of_mass: mass.centre_of_mass,
         inertia: mass.inertia,
+        primitive: None,
         mesh,
         encoding: Encoding::Full,
         hulls,
@@ -210,7 +272,7 @@ mod tests {
             Ok(tacmesh_physics::vhacd_part_points(m, c))
         })
         .expect("a torus has a body");
-        assert_eq!(body.proxy, BodyProxy::Shape);
+        assert_eq!(body.solid, BodySolid::Shape);
         assert!(body.mesh.triangles.is_empty(), "the shape is not repeated");
         assert_eq!((body.object_id, body.shape_version), (3, 7));
         assert!(body.hulls.len() >= 3, "{} hulls", body.hulls.len());
@@ -242,9 +304,94 @@ mod tests {
             Ok(tacmesh_physics::vhacd_part_points(m, c))
         })
         .expect("a shell has a body");
-        assert_eq!(body.proxy, BodyProxy::ShadowVolume);
+        assert_eq!(body.solid, BodySolid::ShadowVolume);
+        assert!(body.solid.is_fallback());
         assert!(!body.mesh.triangles.is_empty());
         assert!(body.volume_m3 > 0.2f32.powi(3), "{} m³", body.volume_m3);
         assert_eq!(body.margin_m, 0.004);
+    }
+
+    /// A box seen from one side, standing on a table, is a box: its body the primitive whole,
+    /// of the box's mass, with no V-HACD run and one hull that holds the box.
+    #[test]
+    fn a_one_view_box_on_a_table_is_a_primitive_body() {
+        let cube = tacmesh_sim::cube(0.2);
+        // Standing on z = 0, seen from the front and above.
+        let lifted = TriMesh::new(
+            cube.vertices.iter().map(|v| *v + Vec3::Z * 0.1).collect(),
+            cube.triangles.clone(),
+        );
+        let eye = Vec3::new(0.3, -1.0, 0.9);
+        let seen: Vec<[u32; 3]> = lifted
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| lifted.vertices[i as usize]);
+                (b - a).cross(c - a).dot(eye - a) > 0.0
+            })
+            .collect();
+        let shell = TriMesh::new(lifted.vertices.clone(), seen);
+        let mut job = job(shell);
+        job.viewpoint_in_object = Some(eye);
+        job.support = Some(SupportPlane {
+            normal: Vec3::Z,
+            offset: 0.0,
+        });
+        let body = make_body(&job, |_, _| panic!("a primitive needs no decomposition"))
+            .expect("a box has a body");
+        assert_eq!(body.solid, BodySolid::Primitive);
+        let primitive = body.primitive.expect("its primitive");
+        assert_eq!(primitive.shape.name(), "box");
+        assert!(
+            (body.volume_m3 / 0.008 - 1.0).abs() < 0.02,
+            "{}",
+            body.volume_m3
+        );
+        assert!(body.centre_of_mass.distance(Vec3::Z * 0.1) < 0.002);
+        assert!(body.mesh.triangles.is_empty());
+        assert_eq!(body.hulls.len(), 1);
+        // It goes on the wire as it is.
+        let mut out = Vec::new();
+        tacmesh_protocol::encode(&tacmesh_protocol::Message::Body(body), &mut out)
+            .expect("a valid Body");
+    }
+
+    /// Every kind of primitive makes a Body the wire takes: its covering hull within a hull's
+    /// vertex cap.
+    #[test]
+    fn every_primitive_kind_makes_a_wire_body() {
+        for shape in [
+            PrimitiveShape::Box {
+                half_m: Vec3::new(0.1, 0.2, 0.3),
+            },
+            PrimitiveShape::Cylinder {
+                radius_m: 0.05,
+                half_height_m: 0.1,
+            },
+            PrimitiveShape::Sphere { radius_m: 0.07 },
+            PrimitiveShape::Capsule {
+                radius_m: 0.03,
+                half_height_m: 0.08,
+            },
+        ] {
+            let primitive = Primitive {
+                shape,
+                rotation: glam::Quat::from_rotation_x(0.4),
+                centre: Vec3::new(0.1, 0.0, 0.2),
+                residual_m: 0.001,
+            };
+            let body = primitive_body(&job(TriMesh::default()), &primitive)
+                .unwrap_or_else(|e| panic!("{}: {e}", shape.name()));
+            let mut out = Vec::new();
+            tacmesh_protocol::encode(&tacmesh_protocol::Message::Body(body.clone()), &mut out)
+                .unwrap_or_else(|e| panic!("{}: {e}", shape.name()));
+            let back = physics_primitive_of(&body);
+            assert_eq!(back.shape, primitive.shape);
+        }
+    }
+
+    fn physics_primitive_of(body: &Body) -> Primitive {
+        crate::physics_scene::physics_primitive(body.primitive.as_ref().expect("a primitive"))
     }
 }
