@@ -345,7 +345,7 @@ fn isolated(meshes: &[(Shape, TriMesh)]) {
             (times[REPS / 2], hulls)
         };
         let parts = convex_parts(mesh, &config).expect("pipeline meshes are closed solids");
-        if !matches!(parts.decomposition, Decomposition::Vhacd { .. }) {
+        if !matches!(parts.decomposition, Decomposition::Decomposed { .. }) {
             continue;
         }
         let (inside_ms, inside) =

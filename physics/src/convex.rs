@@ -71,9 +71,10 @@ impl Default for ConvexConfig {
 pub enum Decomposition {
     /// The mesh filled enough of its convex hull to be that hull.
     SingleHull,
-    /// V-HACD found `parts` parts, merged down to the hulls returned.
-    Vhacd { parts: usize },
-    /// V-HACD found no part with volume; the mesh's convex hull was used instead.
+    /// The decomposition (V-HACD, or [`crate::split_part_points`]) found `parts` parts,
+    /// merged down to the hulls returned.
+    Decomposed { parts: usize },
+    /// The decomposition found no part with volume; the mesh's convex hull was used instead.
     SingleHullFallback,
 }
 
@@ -105,15 +106,15 @@ impl ConvexParts {
 
 /// A convex hull as points and outward triangles, with its volume.
 #[derive(Debug, Clone)]
-struct Hull {
+pub(crate) struct Hull {
     points: Vec<Vec3>,
     triangles: Vec<[u32; 3]>,
-    volume_m3: f64,
+    pub(crate) volume_m3: f64,
 }
 
 impl Hull {
     /// The convex hull of `points`; `None` when they span no volume.
-    fn of(points: &[Vec3]) -> Option<Hull> {
+    pub(crate) fn of(points: &[Vec3]) -> Option<Hull> {
         if points.len() < 4 {
             return None;
         }
@@ -140,7 +141,7 @@ impl Hull {
     }
 
     /// How far `p` lies outside the hull (negative inside), metres.
-    fn distance_outside(&self, p: Vec3) -> f32 {
+    pub(crate) fn distance_outside(&self, p: Vec3) -> f32 {
         self.triangles
             .iter()
             .filter_map(|&[a, b, c]| {
@@ -495,7 +496,7 @@ pub fn convex_parts_with(
             let free_volume_m3 = f64::from(config.concavity) * whole_hull.volume_m3;
             (
                 merge_hulls(found, config.max_hulls, free_volume_m3),
-                Decomposition::Vhacd { parts },
+                Decomposition::Decomposed { parts },
             )
         }
     };
@@ -590,7 +591,10 @@ mod tests {
         let mesh = torus(24, 12, 0.4, 0.1);
         let config = ConvexConfig::default();
         let parts = convex_parts(&mesh, &config).unwrap();
-        assert!(matches!(parts.decomposition, Decomposition::Vhacd { .. }));
+        assert!(matches!(
+            parts.decomposition,
+            Decomposition::Decomposed { .. }
+        ));
         assert!(
             parts.hulls.len() >= 3 && parts.hulls.len() <= config.max_hulls,
             "{} hulls",

@@ -13,6 +13,7 @@ pub mod primitive;
 pub mod proxy;
 pub mod scene;
 pub mod sdf;
+pub mod split;
 pub mod stl;
 pub mod support;
 pub mod urdf;
@@ -34,6 +35,7 @@ pub use scene::{
     SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,
 };
 pub use sdf::{sdf_document, write_sdf, SdfConfig, SdfDocument};
+pub use split::split_part_points;
 pub use support::{min_area_rectangle, rests_on, support_under, WorldSupport};
 pub use tacmesh_source::TriMesh;
 pub use urdf::{urdf_documents, write_urdf, UrdfConfig, UrdfDocuments, WrittenUrdf};

@@ -3,15 +3,16 @@
 //! mesher's thread. An object that is a primitive (a box, a cylinder, a sphere, a capsule
 //! fitted to its shape) is that primitive, whole; otherwise the solid of a one-view shell is
 //! its shadow volume along the sensor's rays to the support it stands on, flagged as a
-//! fallback, and its convex decomposition runs in a child process ([`crate::isolated_vhacd`])
-//! so that a panic inside parry's V-HACD cannot abort the daemon.
+//! fallback, cut into convex parts by planes ([`tacmesh_physics::split_part_points`], a few
+//! milliseconds: parry's V-HACD took seconds on a real scene's proxies and had to run in a
+//! child process, since it panics on degenerate voxel clusters).
 
 use std::time::Instant;
 
 use glam::Vec3;
 use tacmesh_physics::{
-    collision_proxy, convex_parts_with, primitive_of_shape, ConvexConfig, MassProperties,
-    Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
+    collision_proxy, convex_parts_with, primitive_of_shape, split_part_points, ConvexConfig,
+    MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
 };
 use tacmesh_protocol::{Body, BodyPrimitive, BodySolid, Encoding, Hull};
 use tacmesh_source::TriMesh;
@@ -58,11 +59,9 @@ pub enum BodyError {
 /// The worker loop: runs until the queue is closed (see `mesher::run_mesher` for the
 /// heartbeat's use).
 pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
-    let exe = std::env::current_exe().ok();
     loop {
         heartbeat.idle();
-        // Objects with no body that fits their frame come first: a V-HACD run takes a few
-        // hundred milliseconds on a real scene's concave proxies, and an object's first body
+        // Objects with no body that fits their frame come first: an object's first body
         // matters more than a newer version of another's (which keeps its body meanwhile).
         let bodied = crate::lock(&shared.board).objects_with_a_body();
         let Some(job) = shared
@@ -73,31 +72,20 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
         };
         heartbeat.beat();
         let started = Instant::now();
-        let mut child_failed = None;
+        let mut found_none = false;
         let decompose = |mesh: &TriMesh, config: &ConvexConfig| {
-            let parts = match &exe {
-                Some(exe) => crate::isolated_vhacd::decompose(
-                    exe,
-                    mesh,
-                    config,
-                    crate::isolated_vhacd::CHILD_TIMEOUT,
-                ),
-                None => Err("the daemon's own executable cannot be found".into()),
-            };
-            if let Err(why) = &parts {
-                child_failed = Some(why.clone());
-            }
-            parts
+            let parts = split_part_points(mesh, config);
+            found_none = parts.is_empty();
+            Ok(parts)
         };
         let made = make_body(&job, decompose);
-        if let Some(why) = child_failed {
-            // The first failure and every power of two after it: a binary replaced under a
-            // running daemon fails every time, and one line a body would flood the log.
+        if found_none {
+            // The first and every power of two after it: one line a body would flood the log.
             let failed = Counters::add(&shared.counters.decompositions_failed, 1) + 1;
             if failed.is_power_of_two() {
                 tracing::warn!(
-                    "object {}: the V-HACD child failed ({why}); its body is one convex hull \
-                     ({failed} such so far)",
+                    "object {}: its solid could not be cut into convex parts; its body is one \
+                     convex hull ({failed} such so far)",
                     job.object_id
                 );
             }
@@ -194,7 +182,7 @@ fn primitive_body(job: &BodyJob, primitive: &Primitive) -> Result<Body, BodyErro
 }
 
 /// The body of one shape: the primitive it is, if one explains it; else its closed proxy
-/// decomposed by `decompose`, the V-HACD step (see [`tacmesh_physics::convex_parts_with`]).
+/// decomposed by `decompose` (see [`tacmesh_physics::convex_parts_with`]).
 pub fn make_body(
     job: &BodyJob,
     decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,

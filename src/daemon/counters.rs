@@ -77,7 +77,7 @@ pub struct Counters {
     /// Collision bodies made, and shapes that got none (see `bodies`).
     pub bodies_made: AtomicU64,
     pub body_failures: AtomicU64,
-    /// V-HACD children that failed, crashed or overran (those bodies fell back to one hull).
+    /// Solids the decomposition found no convex parts of (those bodies fell back to one hull).
     pub decompositions_failed: AtomicU64,
     /// Objects created and removed by the tracker, whether confirmed or not: on a static
     /// scene both should stop once it has been seen (churn, see [`Counters::births_per_s`]).
@@ -290,7 +290,7 @@ impl CounterSnapshot {
             .collect();
         format!(
             "frames in {} processed {} dropped {}, invalid pixels {}, source errors {} (restarts {}), malformed frames {}, \
-             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}, V-HACD fell back {}), shapes published {}, bodies published {}, poses published {}, \
+             objects {} (born {}, {:.2}/s; removed {}), meshing runs {} (failed {}), pose updates {}, bodies made {} (failed {}, decompositions fell back {}), shapes published {}, bodies published {}, poses published {}, \
              bytes sent {}, subscribers {} (dropped {}, refused {}), subscribes held back {}, log lines lost {}; frame-to-publish p50/p99 {:.1}/{:.1} ms; \
              stage p50/p99 ms: {}",
             self.ring.pushed,
