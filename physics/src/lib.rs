@@ -11,6 +11,7 @@ pub mod orientation;
 pub mod overlap;
 pub mod primitive;
 pub mod proxy;
+pub mod revolution;
 pub mod scene;
 pub mod sdf;
 pub mod split;
@@ -30,6 +31,7 @@ pub use primitive::{
     Primitive, PrimitiveShape, MAX_VOLUME_OVER_CONTAINER, PRIMITIVE_NOISE_M,
 };
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
+pub use revolution::{revolve, Revolved};
 pub use scene::{
     Exclusion, Member, Motion, Scene, SceneBody, SceneSupport, WorldFromBody, WrittenScene,
     SUPPORT_MARGIN_M, SUPPORT_THICKNESS_M,

@@ -844,24 +844,44 @@ pub fn lies_within(
     support: Option<SupportPlane>,
     bound_m: f32,
 ) -> Result<(), String> {
+    let surface = surface_points(&primitive.mesh_with(16, 8));
+    // Inward along the direction to the primitive's centre: the surface normal of a round
+    // primitive, near enough for a box's.
+    let centre = primitive.centre;
+    let surface: Vec<(Vec3, Vec3)> = surface
+        .into_iter()
+        .map(|p| (p, (centre - p).normalize_or_zero()))
+        .collect();
+    within(
+        primitive.shape.volume_m3(),
+        &surface,
+        solid,
+        support,
+        bound_m,
+    )
+}
+
+/// [`lies_within`] for any completed solid: its volume, and points of its surface with the
+/// way into it from each.
+pub(crate) fn within(
+    volume_m3: f32,
+    surface: &[(Vec3, Vec3)],
+    solid: &TriMesh,
+    support: Option<SupportPlane>,
+    bound_m: f32,
+) -> Result<(), String> {
     let held = MassProperties::of_closed_mesh(solid)
         .map_err(|e| format!("the solid that holds it has no volume ({e})"))?;
-    let ratio = primitive.shape.volume_m3() / held.volume_m3;
+    let ratio = volume_m3 / held.volume_m3;
     if ratio.is_nan() || ratio > MAX_VOLUME_OVER_CONTAINER {
         return Err(format!(
             "is {ratio:.2}× the volume of the space that holds the object"
         ));
     }
-    let surface = surface_points(&primitive.mesh_with(16, 8));
     let probes: Vec<Vec3> = surface
         .iter()
-        .filter(|&&p| support.is_none_or(|s| s.height(p) > SUPPORT_BAND_M))
-        .map(|&p| {
-            // Inward along the direction to the nearest point of the primitive's axis or
-            // centre: the surface normal of a round primitive, near enough for a box's.
-            let inward = (primitive.centre - p).normalize_or_zero();
-            p + inward * bound_m
-        })
+        .filter(|(p, _)| support.is_none_or(|s| s.height(*p) > SUPPORT_BAND_M))
+        .map(|&(p, inward)| p + inward * bound_m)
         .collect();
     let inside = probes
         .iter()

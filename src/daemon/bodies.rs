@@ -11,8 +11,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use tacmesh_physics::{
-    collision_proxy, convex_parts_with, primitive_of_shape, split_part_points, ConvexConfig,
-    MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
+    collision_proxy, convex_parts_with, primitive_of_shape, revolve, split_part_points,
+    ConvexConfig, MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
+    PRIMITIVE_NOISE_M,
 };
 use tacmesh_protocol::{Body, BodyPrimitive, BodySolid, Encoding, Hull};
 use tacmesh_source::TriMesh;
@@ -207,19 +208,71 @@ pub fn make_body(
             return primitive_body(job, &primitive);
         }
     }
+    // An open shell standing on a support may be a solid of revolution: the seen side turned
+    // about its axis, if that lies within the proxy too.
+    let bound_m = job.margin_m.max(0.0) + PRIMITIVE_NOISE_M;
+    let revolved = match (proxy.kind, job.support) {
+        (ProxyKind::ShadowVolume | ProxyKind::Extrusion, Some(support)) => {
+            revolve(&job.mesh_in_object, support, bound_m).filter(|r| {
+                match r.lies_within(&proxy.mesh, Some(support), bound_m) {
+                    Ok(()) => true,
+                    Err(why) => {
+                        tracing::debug!(
+                            "object {}: its shell turned about an axis {why}",
+                            job.object_id
+                        );
+                        false
+                    }
+                }
+            })
+        }
+        _ => None,
+    };
+    if let Some(revolved) = revolved {
+        if let Ok(mass) = MassProperties::of_closed_mesh(&revolved.mesh) {
+            if mass.implausible().is_none() {
+                return solid_body(
+                    job,
+                    BodySolid::Completed,
+                    revolved.mesh,
+                    mass,
+                    0.0,
+                    decompose,
+                );
+            }
+        }
+    }
     let mass = MassProperties::of_closed_mesh(&proxy.mesh)?;
-    let parts = convex_parts_with(&proxy.mesh, &ConvexConfig::default(), decompose)?;
+    let (solid, margin_m) = match proxy.kind {
+        // The shape itself: nothing to repeat on the wire.
+        ProxyKind::Surface => (BodySolid::Shape, 0.0),
+        ProxyKind::ShadowVolume => (BodySolid::ShadowVolume, job.margin_m),
+        ProxyKind::Extrusion => (BodySolid::Extrusion, job.margin_m),
+        ProxyKind::OpenShell => return Err(BodyError::NotClosed { kind: proxy.kind }),
+    };
+    solid_body(job, solid, proxy.mesh, mass, margin_m, decompose)
+}
+
+/// The body of a closed solid: its convex parts by `decompose`, its mass properties, and the
+/// solid itself on the wire unless it is the shape.
+fn solid_body(
+    job: &BodyJob,
+    solid: BodySolid,
+    mesh: TriMesh,
+    mass: MassProperties,
+    margin_m: f32,
+    decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
+) -> Result<Body, BodyError> {
+    let parts = convex_parts_with(&mesh, &ConvexConfig::default(), decompose)?;
     let hulls = parts
         .hulls
         .iter()
         .map(|hull| wire_hull(&hull.vertices, &hull.triangles))
         .collect::<Result<Vec<_>, _>>()?;
-    let (solid, mesh, margin_m) = match proxy.kind {
-        // The shape itself: nothing to repeat on the wire.
-        ProxyKind::Surface => (BodySolid::Shape, TriMesh::default(), 0.0),
-        ProxyKind::ShadowVolume => (BodySolid::ShadowVolume, proxy.mesh, job.margin_m),
-        ProxyKind::Extrusion => (BodySolid::Extrusion, proxy.mesh, job.margin_m),
-        ProxyKind::OpenShell => return Err(BodyError::NotClosed { kind: proxy.kind }),
+    let mesh = if solid.carries_mesh() {
+        mesh
+    } else {
+        TriMesh::default()
     };
     Ok(Body {
         object_id: job.object_id,
@@ -381,5 +434,49 @@ mod tests {
 
     fn physics_primitive_of(body: &Body) -> Primitive {
         crate::physics_scene::physics_primitive(body.primitive.as_ref().expect("a primitive"))
+    }
+
+    /// A torus lying on a table, seen from one side, is completed by turning it about its
+    /// axis: its body is that solid (carried on the wire), within the bounds of the truth.
+    #[test]
+    fn a_one_view_torus_on_a_table_is_completed_by_its_symmetry() {
+        let torus = tacmesh_sim::torus(48, 24, 0.15, 0.05);
+        let torus = TriMesh::new(
+            torus
+                .vertices
+                .iter()
+                .map(|v| *v + Vec3::new(0.2, 0.1, 0.05))
+                .collect(),
+            torus.triangles.clone(),
+        );
+        let eye = Vec3::new(0.2, -0.9, 0.95);
+        let seen: Vec<[u32; 3]> = torus
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| torus.vertices[i as usize]);
+                (b - a).cross(c - a).dot(eye - (a + b + c) / 3.0) > 0.0
+            })
+            .collect();
+        let mut job = job(TriMesh::new(torus.vertices.clone(), seen));
+        job.viewpoint_in_object = Some(eye);
+        job.support = Some(SupportPlane {
+            normal: Vec3::Z,
+            offset: 0.0,
+        });
+        let body = make_body(&job, |m, c| Ok(split_part_points(m, c))).expect("a body");
+        assert_eq!(body.solid, BodySolid::Completed);
+        assert!(
+            !body.mesh.triangles.is_empty(),
+            "the completed solid is carried"
+        );
+        let truth = MassProperties::of_closed_mesh(&torus).expect("closed");
+        let ratio = body.volume_m3 / truth.volume_m3;
+        assert!((0.7..1.5).contains(&ratio), "{ratio}× the torus");
+        assert!(body.centre_of_mass.distance(truth.centre_of_mass) < 0.02);
+        let mut out = Vec::new();
+        tacmesh_protocol::encode(&tacmesh_protocol::Message::Body(body), &mut out)
+            .expect("a valid Body");
     }
 }
