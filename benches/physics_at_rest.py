@@ -126,7 +126,7 @@ def pybullet_moves(scene: Path) -> dict[str, float]:
         )
         comment = text[text.index("<!--") : text.index("-->")]
         for a, b in re.findall(
-            r"^\s+(\S+) and (\S+) \(\d+ mm\)$", comment, flags=re.MULTILINE
+            r"^\s+(\S+) and (\S+) \(\d+ mm\)\s*$", comment, flags=re.MULTILINE
         ):
             pybullet.setCollisionFilterPair(
                 names[a], names[b], -1, -1, 0, physicsClientId=client

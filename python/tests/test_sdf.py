@@ -66,7 +66,7 @@ def excluded_pairs(path: Path) -> list[tuple[str, str]]:
     """The pairs the world's first comment says are not to collide with each other."""
     text = path.read_text()
     comment = text[text.index("<!--") : text.index("-->")]
-    return re.findall(r"^\s+(\S+) and (\S+) \(\d+ mm\)$", comment, flags=re.MULTILINE)
+    return re.findall(r"^\s+(\S+) and (\S+) \(\d+ mm\)\s*$", comment, flags=re.MULTILINE)
 
 
 def position(body: int, client: int) -> npt.NDArray[np.float64]:
