@@ -446,8 +446,9 @@ pub enum BodySolid {
     Shape,
     /// The object is a primitive ([`Body::primitive`]); the body carries no mesh.
     Primitive,
-    /// The seen shell closed by the object's symmetry (a mirror plane or an axis of
-    /// revolution), bounded by its support and by space the sensor saw as free.
+    /// The seen shell closed by the object's symmetry (an axis of revolution along the
+    /// support's normal), standing on its support, within the space the sensor did not see
+    /// as free.
     Completed,
     /// Fallback: the open shell swept away from the sensor along its rays to the support plane.
     ShadowVolume,
