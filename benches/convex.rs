@@ -318,47 +318,48 @@ fn main() {
             ),
         );
     }
-    isolated(&meshes);
+    split_against_vhacd(&meshes, options.seed);
 }
 
-/// The daemon runs V-HACD in a child process (`tacmesh::isolated_vhacd`), so that a panic in
-/// parry cannot abort it: what that costs against running it in the process, on the shapes
-/// that need V-HACD, and that the hulls are the same.
-fn isolated(meshes: &[(Shape, TriMesh)]) {
-    use tacmesh::isolated_vhacd::{decompose, CHILD_TIMEOUT};
-    use tacmesh::physics::{convex_parts_with, Decomposition};
-    let exe = Path::new(env!("CARGO_BIN_EXE_tacmesh"));
+/// The daemon cuts solids by planes ([`tacmesh::physics::split_part_points`]) where the
+/// offline path runs V-HACD: both, merged, covered and reduced the same way, on the shapes
+/// that need more than one hull, judged by the same metric.
+fn split_against_vhacd(meshes: &[(Shape, TriMesh)], seed: u64) {
+    use tacmesh::physics::{convex_parts_with, split_part_points, Decomposition};
     let config = ConvexConfig::default();
-    println!("\n### V-HACD in a child process (the daemon's way) against in the process\n");
-    println!("| shape | ms in the process | ms in a child process | same hulls |");
-    println!("|---|---|---|---|");
+    println!("\n### Cut by planes (the daemon's) against V-HACD (offline)\n");
+    println!("| shape | ms: planes / V-HACD | hulls: planes / V-HACD | hull volume ÷ mesh volume: planes / V-HACD | sticks out, max mm: planes / V-HACD | misses, max mm: planes / V-HACD |");
+    println!("|---|---|---|---|---|---|");
     for (shape, mesh) in meshes {
-        let median_ms = |run: &dyn Fn() -> Vec<TriMesh>| {
-            let mut times = Vec::with_capacity(REPS);
-            let mut hulls = Vec::new();
-            for _ in 0..REPS {
-                let start = Instant::now();
-                hulls = run();
-                times.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-            times.sort_by(f64::total_cmp);
-            (times[REPS / 2], hulls)
-        };
-        let parts = convex_parts(mesh, &config).expect("pipeline meshes are closed solids");
-        if !matches!(parts.decomposition, Decomposition::Decomposed { .. }) {
+        let vhacd = convex_parts(mesh, &config).expect("pipeline meshes are closed solids");
+        if !matches!(vhacd.decomposition, Decomposition::Decomposed { .. }) {
             continue;
         }
-        let (inside_ms, inside) =
-            median_ms(&|| convex_parts(mesh, &config).expect("a closed solid").hulls);
-        let (child_ms, child) = median_ms(&|| {
-            convex_parts_with(mesh, &config, |m, c| decompose(exe, m, c, CHILD_TIMEOUT))
+        let mut times = Vec::with_capacity(REPS);
+        let mut hulls = Vec::new();
+        for _ in 0..REPS {
+            let start = Instant::now();
+            hulls = convex_parts_with(mesh, &config, |m, c| Ok(split_part_points(m, c)))
                 .expect("a closed solid")
-                .hulls
-        });
+                .hulls;
+            times.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        let planes = judge(mesh, &hulls, times[REPS / 2], seed);
+        let them = ours(mesh, seed);
         println!(
-            "| {} | {inside_ms:.0} | {child_ms:.0} | {} |",
+            "| {} | {:.1} / {:.0} | {} / {} | {:.3} / {:.3} | {} / {} | {} / {} |",
             shape.name(),
-            if inside == child { "yes" } else { "no" }
+            planes.ms,
+            them.ms,
+            planes.hulls,
+            them.hulls,
+            planes.volume_ratio,
+            them.volume_ratio,
+            mm(planes.out_max_m),
+            mm(them.out_max_m),
+            mm(planes.missed_max_m),
+            mm(them.missed_max_m),
         );
     }
 }

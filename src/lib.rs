@@ -13,7 +13,6 @@
 
 pub mod daemon;
 pub mod frame_ring;
-pub mod isolated_vhacd;
 pub mod latency;
 pub mod log_sink;
 pub mod physics_scene;

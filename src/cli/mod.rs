@@ -49,20 +49,6 @@ enum Command {
     Eval(eval::EvalArgs),
     #[command(subcommand)]
     Sim(sim::SimCommand),
-    /// The daemon's V-HACD child (`tacmesh::isolated_vhacd`): a mesh as OBJ on standard input,
-    /// each part's points on standard output. Not for people.
-    #[command(name = "__vhacd", hide = true)]
-    Vhacd(VhacdArgs),
-}
-
-#[derive(Debug, clap::Args)]
-struct VhacdArgs {
-    #[arg(long)]
-    resolution: u32,
-    #[arg(long)]
-    concavity: f32,
-    #[arg(long)]
-    max_hulls: usize,
 }
 
 /// Logging to standard error, set up once, when the command knows its settings. The filter:
@@ -171,15 +157,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Mesh(args) => mesh::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Sim(cmd) => sim::run(cmd),
-        Command::Vhacd(args) => {
-            let config = tacmesh::physics::ConvexConfig {
-                resolution: args.resolution,
-                concavity: args.concavity,
-                max_hulls: args.max_hulls,
-                ..tacmesh::physics::ConvexConfig::default()
-            };
-            tacmesh::isolated_vhacd::serve_as_child(&config).map_err(anyhow::Error::msg)
-        }
     }
 }
 
