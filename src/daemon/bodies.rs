@@ -46,6 +46,15 @@ impl ObjectJob for BodyJob {
 /// Body jobs waiting for the worker, at most one per object.
 pub type BodyQueue = LatestJobs<BodyJob>;
 
+/// How much looser a refit may be and keep the primitive an object already is: a new shape
+/// version a little bumpier than the last (the demo's ball, now and then) should not turn a
+/// sphere into a shadow volume of twice its mass and back.
+pub const HELD_PRIMITIVE_SLACK: f32 = 1.5;
+
+/// Objects whose held primitive the worker remembers, at most: past it, it forgets them all
+/// (ids only grow; a forgotten object is only refitted without slack once).
+const MAX_HELD_PRIMITIVES: usize = 4096;
+
 /// Why an object got no body.
 #[derive(Debug, thiserror::Error)]
 pub enum BodyError {
@@ -60,6 +69,9 @@ pub enum BodyError {
 /// The worker loop: runs until the queue is closed (see `mesher::run_mesher` for the
 /// heartbeat's use).
 pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
+    // The kind of primitive each object's last body was.
+    let mut held_primitives: std::collections::HashMap<u64, &'static str> =
+        std::collections::HashMap::new();
     loop {
         heartbeat.idle();
         // Objects with no body that fits their frame come first: an object's first body
@@ -73,13 +85,25 @@ pub fn run_bodies(shared: &Shared, heartbeat: &Heartbeat) {
         };
         heartbeat.beat();
         let started = Instant::now();
+        let held = held_primitives.get(&job.object_id).copied();
         let mut found_none = false;
         let decompose = |mesh: &TriMesh, config: &ConvexConfig| {
             let parts = split_part_points(mesh, config);
             found_none = parts.is_empty();
             Ok(parts)
         };
-        let made = make_body(&job, decompose);
+        let made = make_body(&job, held, decompose);
+        match made.as_ref().ok().and_then(|b| b.primitive) {
+            Some(primitive) => {
+                if held_primitives.len() >= MAX_HELD_PRIMITIVES {
+                    held_primitives.clear();
+                }
+                held_primitives.insert(job.object_id, primitive.shape.name());
+            }
+            None => {
+                held_primitives.remove(&job.object_id);
+            }
+        }
         if found_none {
             // The first and every power of two after it: one line a body would flood the log.
             let failed = Counters::add(&shared.counters.decompositions_failed, 1) + 1;
@@ -182,10 +206,13 @@ fn primitive_body(job: &BodyJob, primitive: &Primitive) -> Result<Body, BodyErro
     })
 }
 
-/// The body of one shape: the primitive it is, if one explains it; else its closed proxy
-/// decomposed by `decompose` (see [`tacmesh_physics::convex_parts_with`]).
+/// The body of one shape: the primitive it is, if one explains it (the kind its last body
+/// was, `held`, within [`HELD_PRIMITIVE_SLACK`] times the bound); else its shell completed by
+/// its symmetry; else its closed proxy decomposed by `decompose` (see
+/// [`tacmesh_physics::convex_parts_with`]).
 pub fn make_body(
     job: &BodyJob,
+    held: Option<&'static str>,
     decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
 ) -> Result<Body, BodyError> {
     let proxy = collision_proxy(
@@ -201,9 +228,15 @@ pub fn make_body(
         return Err(BodyError::NotClosed { kind: proxy.kind });
     }
     // The proxy holds the object: a primitive must lie within it.
-    if let Some(primitive) =
-        primitive_of_shape(&job.mesh_in_object, job.support, job.margin_m, &proxy.mesh)
-    {
+    let fitted = primitive_of_shape(&job.mesh_in_object, job.support, job.margin_m, &proxy.mesh)
+        .or_else(|| {
+            let kind = held?;
+            let looser = HELD_PRIMITIVE_SLACK * (job.margin_m.max(0.0) + PRIMITIVE_NOISE_M)
+                - PRIMITIVE_NOISE_M;
+            primitive_of_shape(&job.mesh_in_object, job.support, looser, &proxy.mesh)
+                .filter(|p| p.shape.name() == kind)
+        });
+    if let Some(primitive) = fitted {
         if primitive.mass().implausible().is_none() {
             return primitive_body(job, &primitive);
         }
@@ -309,7 +342,7 @@ mod tests {
     #[test]
     fn a_closed_shape_is_its_own_proxy_and_a_failed_decomposition_is_one_hull() {
         let torus = tacmesh_sim::torus(24, 12, 0.4, 0.1);
-        let body = make_body(&job(torus.clone()), |m, c| {
+        let body = make_body(&job(torus.clone()), None, |m, c| {
             Ok(tacmesh_physics::vhacd_part_points(m, c))
         })
         .expect("a torus has a body");
@@ -319,8 +352,8 @@ mod tests {
         assert!(body.hulls.len() >= 3, "{} hulls", body.hulls.len());
         let exact = MassProperties::of_closed_mesh(&torus).expect("a closed torus");
         assert!((body.volume_m3 - exact.volume_m3).abs() < 1e-6);
-        let fallback =
-            make_body(&job(torus), |_, _| Err("the child crashed".into())).expect("still a body");
+        let fallback = make_body(&job(torus), None, |_, _| Err("the child crashed".into()))
+            .expect("still a body");
         assert_eq!(fallback.hulls.len(), 1);
     }
 
@@ -341,7 +374,7 @@ mod tests {
             })
             .collect();
         let shell = TriMesh::new(cube.vertices.clone(), seen);
-        let body = make_body(&job(shell), |m, c| {
+        let body = make_body(&job(shell), None, |m, c| {
             Ok(tacmesh_physics::vhacd_part_points(m, c))
         })
         .expect("a shell has a body");
@@ -379,8 +412,10 @@ mod tests {
             normal: Vec3::Z,
             offset: 0.0,
         });
-        let body = make_body(&job, |_, _| panic!("a primitive needs no decomposition"))
-            .expect("a box has a body");
+        let body = make_body(&job, None, |_, _| {
+            panic!("a primitive needs no decomposition")
+        })
+        .expect("a box has a body");
         assert_eq!(body.solid, BodySolid::Primitive);
         let primitive = body.primitive.expect("its primitive");
         assert_eq!(primitive.shape.name(), "box");
@@ -465,7 +500,7 @@ mod tests {
             normal: Vec3::Z,
             offset: 0.0,
         });
-        let body = make_body(&job, |m, c| Ok(split_part_points(m, c))).expect("a body");
+        let body = make_body(&job, None, |m, c| Ok(split_part_points(m, c))).expect("a body");
         assert_eq!(body.solid, BodySolid::Completed);
         assert!(
             !body.mesh.triangles.is_empty(),
@@ -478,5 +513,49 @@ mod tests {
         let mut out = Vec::new();
         tacmesh_protocol::encode(&tacmesh_protocol::Message::Body(body), &mut out)
             .expect("a valid Body");
+    }
+
+    /// A ball seen a little bumpier than the bound allows is no primitive the first time;
+    /// held as a sphere from its last body, it stays one within the slack.
+    #[test]
+    fn a_held_primitive_is_kept_through_a_bumpier_shape() {
+        let ball = tacmesh_sim::uv_sphere(32, 16, 0.1);
+        let centre = Vec3::new(0.0, 0.0, 0.1);
+        let eye = Vec3::new(0.0, -1.0, 0.9);
+        // Radial bumps of up to ±9 mm, deterministic.
+        let bumpy: Vec<Vec3> = ball
+            .vertices
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let bump = 0.009
+                    * ((i as f32 * 12.9898).sin() * 43_758.547)
+                        .rem_euclid(1.0)
+                        .mul_add(2.0, -1.0);
+                centre + *v * (1.0 + bump / 0.1)
+            })
+            .collect();
+        let seen: Vec<[u32; 3]> = ball
+            .triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| bumpy[i as usize]);
+                (b - a).cross(c - a).dot(eye - (a + b + c) / 3.0) > 0.0
+            })
+            .collect();
+        let mut job = job(TriMesh::new(bumpy, seen));
+        job.viewpoint_in_object = Some(eye);
+        job.support = Some(SupportPlane {
+            normal: Vec3::Z,
+            offset: 0.0,
+        });
+        let decompose = |m: &TriMesh, c: &ConvexConfig| Ok(split_part_points(m, c));
+        let fresh = make_body(&job, None, decompose).expect("a body");
+        assert_eq!(fresh.primitive, None, "too bumpy for a fresh fit");
+        let held = make_body(&job, Some("sphere"), decompose).expect("a body");
+        assert_eq!(held.primitive.map(|p| p.shape.name()), Some("sphere"));
+        let other = make_body(&job, Some("box"), decompose).expect("a body");
+        assert_eq!(other.primitive, None, "only the kind it was");
     }
 }
