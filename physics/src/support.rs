@@ -48,6 +48,14 @@ impl WorldSupport {
         })
     }
 
+    /// The plane parallel to this one `height_m` above it (the top of an object on it).
+    pub fn raised(&self, height_m: f32) -> WorldSupport {
+        WorldSupport {
+            point: self.point + self.normal.normalize_or_zero() * height_m,
+            ..*self
+        }
+    }
+
     /// This plane in an object's frame, given `world_from_object`.
     pub fn in_frame(&self, world_from_object: Affine3A) -> SupportPlane {
         // n·x = n·p in the world; with x = R·x_o + t: (Rᵀn)·x_o = n·p − n·t.
@@ -79,6 +87,55 @@ pub fn support_under<'a>(
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, s)| s)
+}
+
+/// How far above the top of an object under it another object's lowest point may be and
+/// still rest on it, metres: the segmentation cuts each off a little short where they meet.
+pub const RESTING_GAP_M: f32 = 0.03;
+
+/// The top an object (its vertices in the world) rests on when it stands on another object
+/// rather than on `support` itself: the highest top among `others` (each one's vertices in the
+/// world) that is above the support, within [`RESTING_GAP_M`] of the object's lowest point
+/// either way, and under its footprint (their extents across the support's plane overlap). The height above the support it rests at (the lower
+/// of that top and the object's lowest point), metres, or `None`.
+pub fn resting_top(support: &WorldSupport, object: &[Vec3], others: &[Vec<Vec3>]) -> Option<f32> {
+    let normal = support.normal.normalize_or_zero();
+    let u = normal.any_orthonormal_vector();
+    let v = normal.cross(u);
+    // Height over the support, and the extent across its plane.
+    let extent = |points: &[Vec3]| {
+        points.iter().fold(
+            (
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                glam::Vec2::splat(f32::INFINITY),
+                glam::Vec2::splat(f32::NEG_INFINITY),
+            ),
+            |(low, high, lo, hi), p| {
+                let h = normal.dot(*p - support.point);
+                let q = glam::Vec2::new(p.dot(u), p.dot(v));
+                (low.min(h), high.max(h), lo.min(q), hi.max(q))
+            },
+        )
+    };
+    let (bottom, _, lo, hi) = extent(object);
+    if !bottom.is_finite() || bottom <= TOUCHING_M {
+        return None;
+    }
+    others
+        .iter()
+        .filter_map(|other| {
+            let (_, top, other_lo, other_hi) = extent(other);
+            // Where they meet, each shape runs on a little into the other's space (the
+            // lower one's top past the upper one's bottom on the demo's stack, by 15 mm):
+            // the upper one rests at whichever is lower.
+            let under = top > TOUCHING_M
+                && (bottom - top).abs() <= RESTING_GAP_M
+                && other_lo.cmple(hi).all()
+                && lo.cmple(other_hi).all();
+            under.then_some(top.min(bottom))
+        })
+        .max_by(f32::total_cmp)
 }
 
 /// How close to the support a part's vertex must be to count as touching it, metres.
@@ -174,6 +231,50 @@ fn inside_convex(polygon: &[glam::Vec2], p: glam::Vec2) -> bool {
 
 #[cfg(test)]
 mod tests {
+    /// A box on a box rests on the lower one's top; a box beside it, or high above it, does
+    /// not; the table's own objects rest on nothing.
+    #[test]
+    fn an_object_on_another_rests_on_its_top() {
+        let table = WorldSupport {
+            object_id: 1 << 32,
+            point: Vec3::ZERO,
+            normal: Vec3::Z,
+            area_m2: 4.0,
+            half_size_m: 1.0,
+        };
+        let cube = |centre: Vec3, half: f32| -> Vec<Vec3> {
+            (0..8)
+                .map(|k| {
+                    let s = |b: u32| if k & (1 << b) == 0 { -half } else { half };
+                    centre + Vec3::new(s(0), s(1), s(2))
+                })
+                .collect()
+        };
+        let lower = cube(Vec3::new(0.0, 0.0, 0.1), 0.1);
+        // Segmented a little short of where they meet: 8 mm over the lower one's top.
+        let upper = cube(Vec3::new(0.02, 0.0, 0.258), 0.05);
+        let top = resting_top(&table, &upper, std::slice::from_ref(&lower))
+            .expect("it rests on the lower");
+        assert!((top - 0.2).abs() < 1e-5, "{top}");
+        // The lower one's top runs on 15 mm into the upper one: it rests at its own bottom.
+        let into = cube(Vec3::new(0.02, 0.0, 0.241), 0.05);
+        let top = resting_top(&table, &into, std::slice::from_ref(&lower))
+            .expect("it rests on the lower");
+        assert!((top - 0.191).abs() < 1e-5, "{top}");
+        assert_eq!(table.raised(top).in_frame(Affine3A::IDENTITY).offset, top);
+        let beside = cube(Vec3::new(0.5, 0.0, 0.05), 0.05);
+        assert_eq!(
+            resting_top(&table, &beside, std::slice::from_ref(&lower)),
+            None
+        );
+        let above = cube(Vec3::new(0.0, 0.0, 0.45), 0.05);
+        assert_eq!(
+            resting_top(&table, &above, std::slice::from_ref(&lower)),
+            None
+        );
+        assert_eq!(resting_top(&table, &lower, &[upper]), None);
+    }
+
     use super::*;
 
     fn table(height: f32) -> TriMesh {

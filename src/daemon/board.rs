@@ -227,6 +227,24 @@ impl Board {
         })
     }
 
+    /// The published shapes of the objects (not the supports) other than `id`, each as its
+    /// vertices in the world: what an object may rest on.
+    pub fn other_objects_in_world(&self, id: u64) -> Vec<Vec<Vec3>> {
+        self.entries
+            .iter()
+            .filter(|(&other, _)| other != id && other < FIRST_SUPPORT_ID)
+            .filter_map(|(_, entry)| {
+                let mesh = &entry.mesh.as_ref()?.mesh_in_object;
+                Some(
+                    mesh.vertices
+                        .iter()
+                        .map(|&v| entry.world_from_object.transform_point3(v))
+                        .collect(),
+                )
+            })
+            .collect()
+    }
+
     /// The support planes published now, in the world.
     pub fn supports(&self) -> Vec<WorldSupport> {
         self.entries

@@ -141,16 +141,23 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
     // Its collision body is made off this thread: V-HACD takes a few hundred milliseconds on
     // a concave object, and the next mesh should not wait for it.
     if let Some(published) = published {
-        let support = tacmesh_physics::support_under(
-            &board.supports(),
-            &published
-                .mesh_in_object
-                .vertices
-                .iter()
-                .map(|&v| published.world_from_object.transform_point3(v))
-                .collect::<Vec<_>>(),
-        )
-        .map(|s| s.in_frame(published.world_from_object));
+        let in_world: Vec<glam::Vec3> = published
+            .mesh_in_object
+            .vertices
+            .iter()
+            .map(|&v| published.world_from_object.transform_point3(v))
+            .collect();
+        let supports = board.supports();
+        // What it stands on: a support plane, or the top of another object on it (then the
+        // plane through that top: the body rests there, not on the table under both).
+        let support = tacmesh_physics::support_under(&supports, &in_world).map(|plane| {
+            let others = board.other_objects_in_world(job.object_id);
+            match tacmesh_physics::resting_top(plane, &in_world, &others) {
+                Some(top) => plane.raised(top),
+                None => *plane,
+            }
+            .in_frame(published.world_from_object)
+        });
         drop(board);
         shared.body_queue.submit(BodyJob {
             object_id: job.object_id,
