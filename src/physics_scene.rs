@@ -158,6 +158,7 @@ impl PhysicsScene {
                     (Some(body), _) => body.primitive.as_ref().map(physics_primitive),
                     (None, Some(proxy)) if proxy.closed => primitive_of_shape(
                         &object.shape.mesh,
+                        None,
                         support,
                         object.shape.report.max_residual_m,
                         &proxy.mesh,

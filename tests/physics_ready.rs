@@ -423,3 +423,143 @@ fn proxies_of_one_view_shells_are_closed_and_hold_the_object() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Mass and contact from every side against what an engine collides with for a one-view
+/// object: the daemon's own body of each of the six shapes (1 m) standing on a table, seen
+/// once from 20° above it at 20 mm noise, its primitive fitted to the cloud fused into voxels
+/// as the daemon's grid fuses it. The body is the primitive the object is, its completion by
+/// turning about an axis, or (flagged) its shadow volume; the engine collides the primitive,
+/// else the convex hulls. `cargo test --release --test tests -- physics_ready::one_view_bodies
+/// --nocapture` prints the figures BENCHMARKS.md quotes.
+#[test]
+fn one_view_bodies_complete_the_object_for_mass_and_contact() {
+    use tacmesh::daemon::{make_body, BodyJob};
+    use tacmesh::physics::split_part_points;
+    use tacmesh::physics::MassProperties;
+    use tacmesh::physics_scene::physics_primitive;
+    use tacmesh::protocol::BodySolid;
+
+    let eye = Vec3::new(1.5, -2.0, 1.0);
+    eprintln!(
+        "| shape | body | volume ÷ true | centre of mass off, mm | contact from every side, p95: \
+         first contact mm / normal ° | probes through it |"
+    );
+    eprintln!("|---|---|---:|---:|---|---:|");
+    let mut failures = Vec::new();
+    for shape in Shape::ALL {
+        let truth = shape.mesh();
+        let bottom = truth
+            .vertices
+            .iter()
+            .map(|v| v.z)
+            .fold(f32::INFINITY, f32::min);
+        let table = SupportPlane {
+            normal: Vec3::Z,
+            offset: bottom,
+        };
+        let case = Case {
+            shape,
+            noise_mm: 20.0,
+            points: 30_000,
+            seed: 311,
+            viewpoint: Some(eye),
+        };
+        let mut cloud = front_facing_cloud(&truth, eye, &case);
+        cloud.points.retain(|p| p.z > bottom + 0.01);
+        let config = MeshConfig {
+            viewpoint: Some(eye),
+            ..MeshConfig::default()
+        };
+        let (shell, report) = mesh_cloud(&cloud, &config).expect("meshing a one-view shell");
+        let mut grid = tacmesh::reconstruct::moment_grid::MomentGrid::new(report.voxel_size_m);
+        grid.integrate(&cloud.points);
+        let fused = grid.surface_means(4096);
+        let job = BodyJob {
+            object_id: 1,
+            shape_version: 1,
+            mesh_in_object: shell,
+            viewpoint_in_object: Some(eye),
+            support: Some(table),
+            margin_m: report.max_residual_bound_m,
+            // What the daemon fits a primitive to: the cloud fused into voxels, their means.
+            fused_points: fused.points,
+            fused_roughness_m: fused.roughness_m,
+        };
+        let body = make_body(&job, None, |mesh, config| {
+            Ok(split_part_points(mesh, config))
+        })
+        .expect("a one-view shell on a table has a body");
+        // What the engine collides with: the primitive exactly (finely tessellated here), or
+        // the union of the hulls.
+        let surface = match &body.primitive {
+            Some(primitive) => physics_primitive(primitive).mesh_with(128, 64),
+            None => {
+                let mut union = TriMesh::new(Vec::new(), Vec::new());
+                for hull in &body.hulls {
+                    let hull = hull.mesh();
+                    let base = union.vertices.len() as u32;
+                    union.vertices.extend(&hull.vertices);
+                    union
+                        .triangles
+                        .extend(hull.triangles.iter().map(|t| t.map(|i| i + base)));
+                }
+                union
+            }
+        };
+        let contact = contact_fidelity(&truth, &surface, &ContactConfig::default())
+            .expect("contact with the body")
+            .overall;
+        let through = contact.missed_by_candidate as f64 / contact.probes.max(1) as f64;
+        // Suzanne's own mesh is not closed: no volume or centre to compare with.
+        let true_mass = (shape != Shape::Monkey)
+            .then(|| MassProperties::of_closed_mesh(&truth).expect("a closed true shape"));
+        let ratio = true_mass
+            .as_ref()
+            .map(|m| f64::from(body.volume_m3) / f64::from(m.volume_m3));
+        let off_mm = true_mass
+            .as_ref()
+            .map(|m| f64::from(body.centre_of_mass.distance(m.centre_of_mass)) * 1e3);
+        let what = match &body.primitive {
+            Some(p) => physics_primitive(p).shape.name().to_owned(),
+            None => format!("{} ({} hulls)", body.solid.as_str(), body.hulls.len()),
+        };
+        eprintln!(
+            "| {shape:?} | {what} | {} | {} | {:.1} / {:.1} | {:.1} % |",
+            ratio.map_or("–".to_owned(), |r| format!("{r:.2}")),
+            off_mm.map_or("–".to_owned(), |m| format!("{m:.0}")),
+            contact.first_contact_m.p95 * 1e3,
+            contact.normal_deg.p95,
+            through * 100.0,
+        );
+        // A primitive where the shape is one, to issue 40's targets: 0.8–1.25× the volume,
+        // the centre of mass within 15 mm, contact p95 within 10 mm and 10°. The others are
+        // still their shadow volumes (a cone's and a torus's turned solids reach out of them
+        // at this noise): closed, holding the object, never lighter than 0.7× it.
+        let primitive = match shape {
+            Shape::Cube => Some("box"),
+            Shape::Cylinder => Some("cylinder"),
+            Shape::Sphere => Some("sphere"),
+            Shape::Cone | Shape::Torus | Shape::Monkey => None,
+        };
+        let on_target = match primitive {
+            Some(kind) => {
+                what == kind
+                    && ratio.is_some_and(|r| (0.8..=1.25).contains(&r))
+                    && off_mm.is_some_and(|m| m <= 15.0)
+                    && contact.first_contact_m.p95 <= 0.010
+                    && contact.normal_deg.p95 <= 10.0
+            }
+            None => body.solid != BodySolid::Primitive && ratio.is_none_or(|r| r >= 0.7),
+        };
+        if !on_target || through > 0.05 {
+            failures.push(format!(
+                "{shape:?}: {what}, {ratio:?}× its volume, centre {off_mm:?} mm off, contact \
+                 p95 {:.1} mm / {:.1}°, {:.1} % of the probes through it",
+                contact.first_contact_m.p95 * 1e3,
+                contact.normal_deg.p95,
+                through * 100.0
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

@@ -28,7 +28,7 @@ pub use mjcf::{mjcf_document, write_mjcf, MjcfConfig, MjcfDocument};
 pub use overlap::{lift_onto_supports, starting_overlaps, LIFT_MAX_M, OVERLAP_TOLERANCE_M};
 pub use primitive::{
     fit_closed_primitive, fit_primitive, lies_within, primitive_of_shape, surface_points,
-    Primitive, PrimitiveShape, MAX_VOLUME_OVER_CONTAINER, PRIMITIVE_NOISE_M,
+    FusedPoints, Primitive, PrimitiveShape, MAX_VOLUME_OVER_CONTAINER, PRIMITIVE_NOISE_M,
 };
 pub use proxy::{collision_proxy, Proxy, ProxyConfig, ProxyKind, SupportPlane};
 pub use revolution::{revolve, Revolved};

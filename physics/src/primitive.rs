@@ -6,8 +6,9 @@
 //!
 //! A fit is accepted only when every part of what was seen is explained: the 95th percentile
 //! of the seen points' distances from the primitive's surface within the caller's bound (the
-//! shape's residual bound and the sensor's noise), and the primitive resting on the support the
-//! object stands on. A box is fitted only when its top was seen (else its depth is a guess),
+//! shape's residual bound and the sensor's noise, and, for fused points, their own scatter
+//! about their surface: [`FusedPoints`]), and the primitive resting on the support the object
+//! stands on. A box is fitted only when its top was seen (else its depth is a guess),
 //! a standing cylinder only when its wall was.
 //!
 //! The fits are this project's own (no crate fits primitives to partial, one-sided views with a
@@ -530,15 +531,23 @@ fn sphere(points: &[Vec3], support: Option<SupportPlane>) -> Option<Primitive> {
     rests(&primitive, support).then_some(primitive)
 }
 
+/// How high the points reach above the support: the 99th percentile of their heights (the
+/// highest point is the noise's, not the object's).
+fn top_height(points: &[Vec3], support: SupportPlane) -> f32 {
+    let mut heights: Vec<f32> = points.iter().map(|&p| support.height(p)).collect();
+    if heights.is_empty() {
+        return f32::NAN;
+    }
+    let k = (heights.len() * 99 / 100).min(heights.len() - 1);
+    *heights.select_nth_unstable_by(k, f32::total_cmp).1
+}
+
 /// A box standing on the support: its footprint the smallest rectangle around the points
 /// seen from above, its top the highest points. Needs its top seen.
 fn standing_box(points: &[Vec3], support: SupportPlane, bound_m: f32) -> Option<Primitive> {
     let normal = support.normal.normalize_or_zero();
     let (u, v) = plane_axes(normal);
-    let top = points
-        .iter()
-        .map(|&p| support.height(p))
-        .fold(f32::NEG_INFINITY, f32::max);
+    let top = top_height(points, support);
     let on_top = points
         .iter()
         .filter(|&&p| support.height(p) > top - 2.0 * bound_m)
@@ -588,10 +597,7 @@ fn standing_round(
 ) -> Option<Primitive> {
     let normal = support.normal.normalize_or_zero();
     let (u, v) = plane_axes(normal);
-    let top = points
-        .iter()
-        .map(|&p| support.height(p))
-        .fold(f32::NEG_INFINITY, f32::max);
+    let top = top_height(points, support);
     let wall: Vec<Vec2> = points
         .iter()
         .filter(|&&p| support.height(p) < top - 2.0 * bound_m)
@@ -797,14 +803,29 @@ pub fn fit_closed_primitive(points: &[Vec3], bound_m: f32) -> Option<Primitive> 
         .min_by(|a, b| a.residual_m.total_cmp(&b.residual_m))
 }
 
+/// The points a shape was made from, fused (a voxel's mean each), and how far they scatter
+/// about their own surface (the 95th percentile of their distances from local planes; NaN or
+/// negative counts as none), metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusedPoints<'a> {
+    pub points: &'a [Vec3],
+    pub roughness_m: f32,
+}
+
 /// What a primitive may be off a shape beyond the shape's own residual bound, metres: the
 /// sensor's noise at a metre or two, which the fused surface keeps some of.
 pub const PRIMITIVE_NOISE_M: f32 = 0.003;
 
-/// The primitive a published shape is, if one explains it: its mesh's surface points within
+/// The primitive a published shape is, if one explains it: the points it was made from within
 /// its residual bound and the sensor's noise ([`PRIMITIVE_NOISE_M`]), resting on `support`
 /// (the plane it stands on, in its frame) when there is one; a closed shape on nothing known
 /// in any orientation. The daemon's bodies and a subscriber's scene both fit this way.
+///
+/// `fused` are the points the shape was made from, fused (each voxel's mean: the sensor's
+/// noise averaged out), when the caller has them: the daemon does. Fitted to those, a box's
+/// sides and a cylinder's radius come to within millimetres even where the mesh, simplified to
+/// its residual bound, is off by that bound, and a box does not run on past its top's unseen
+/// edges as the mesh does. Empty: the mesh's surface points (a subscriber has only the mesh).
 ///
 /// `container` is a closed solid known to hold the object: the shape itself when it is closed,
 /// else its conservative proxy (the space behind what was seen). A fit must lie within it (see
@@ -813,15 +834,24 @@ pub const PRIMITIVE_NOISE_M: f32 = 0.003;
 /// refuses.
 pub fn primitive_of_shape(
     mesh: &TriMesh,
+    fused: Option<FusedPoints<'_>>,
     support: Option<SupportPlane>,
     residual_bound_m: f32,
     container: &TriMesh,
 ) -> Option<Primitive> {
-    let points = surface_points(mesh);
     let bound_m = residual_bound_m.max(0.0) + PRIMITIVE_NOISE_M;
+    // The fused points scatter about the surface by their roughness: a primitive explains
+    // them when it is off them by no more than that and the bound.
+    let (points, fit_bound_m) = match fused.filter(|f| !f.points.is_empty()) {
+        Some(fused) => (
+            fused.points.to_vec(),
+            bound_m + fused.roughness_m.clamp(0.0, 1.0),
+        ),
+        None => (surface_points(mesh), bound_m),
+    };
     let fit = match support {
-        None if mesh.is_closed() => fit_closed_primitive(&points, bound_m),
-        _ => fit_primitive(&points, support, bound_m),
+        None if mesh.is_closed() => fit_closed_primitive(&points, fit_bound_m),
+        _ => fit_primitive(&points, support, fit_bound_m),
     }?;
     match lies_within(&fit, container, support, bound_m) {
         Ok(()) => Some(fit),
@@ -1274,7 +1304,7 @@ mod tests {
             unchecked.is_some_and(|p| p.shape.volume_m3() > 0.01),
             "the fit alone takes a huge primitive: {unchecked:?}"
         );
-        let refused = primitive_of_shape(&patch, Some(TABLE), BOUND_M, &held.mesh);
+        let refused = primitive_of_shape(&patch, None, Some(TABLE), BOUND_M, &held.mesh);
         assert_eq!(refused, None, "a flat patch is no primitive");
 
         let truth = Primitive {
@@ -1286,7 +1316,7 @@ mod tests {
             residual_m: 0.0,
         };
         let whole = truth.mesh();
-        let fit = primitive_of_shape(&whole, Some(TABLE), BOUND_M, &whole).expect("a box");
+        let fit = primitive_of_shape(&whole, None, Some(TABLE), BOUND_M, &whole).expect("a box");
         assert_eq!(fit.shape.name(), "box");
         assert_eq!(lies_within(&truth, &whole, Some(TABLE), BOUND_M), Ok(()));
         let twice = Primitive {

@@ -125,12 +125,25 @@ fn circle(points: &[Vec2]) -> Option<Vec2> {
 
 /// The shell turned about an axis along the support's normal, if it is a solid of revolution
 /// within `bound_m` (see the module's documentation). `None` when it is not, or when too
-/// little of it was seen to tell.
-pub fn revolve(shell: &TriMesh, support: SupportPlane, bound_m: f32) -> Option<Revolved> {
+/// little of it was seen to tell. `scatter_m` is how far the data the shell was made from
+/// scatter about their surface (the fused points' roughness; 0 when unknown): the shell's walls
+/// may stray from one radius per height by the bound and that much.
+pub fn revolve(
+    shell: &TriMesh,
+    support: SupportPlane,
+    bound_m: f32,
+    scatter_m: f32,
+) -> Option<Revolved> {
     let up = support.normal.try_normalize()?;
     if bound_m.is_nan() || bound_m <= 0.0 {
         return None;
     }
+    let tolerance_m = bound_m
+        + if scatter_m > 0.0 {
+            scatter_m.min(1.0)
+        } else {
+            0.0
+        };
     let u = up.any_orthonormal_vector();
     let v = up.cross(u);
     let flat = |p: Vec3| Vec2::new(p.dot(u), p.dot(v));
@@ -237,32 +250,35 @@ pub fn revolve(shell: &TriMesh, support: SupportPlane, bound_m: f32) -> Option<R
             })
         })
         .collect();
-    // A slice's radii are its walls' (the bins' medians: a stray vertex of the shell does not
-    // widen the solid), where it has walls; else its outermost and innermost points.
-    let mut wall_outer = vec![0.0f32; slices];
-    let mut wall_inner = vec![f32::INFINITY; slices];
+    // A slice's radii are its walls' (the mean of its bins' medians: a stray vertex of the
+    // shell does not widen the solid, and a sloping wall, a cone's, is met at the slice's
+    // middle), where it has walls; else its outermost and innermost points.
+    let mut wall_outer = vec![(0.0f32, 0u32); slices];
+    let mut wall_inner = vec![(0.0f32, 0u32); slices];
     for (bin, sides) in medians.iter().enumerate() {
         let k = (((bin as f32 + 0.5) * bound_m / dh) as usize).min(slices - 1);
         if let Some(r) = sides[0] {
-            wall_outer[k] = wall_outer[k].max(r);
+            wall_outer[k].0 += r;
+            wall_outer[k].1 += 1;
         }
         if let Some(r) = sides[1] {
-            wall_inner[k] = wall_inner[k].min(r);
+            wall_inner[k].0 += r;
+            wall_inner[k].1 += 1;
         }
     }
     for k in 0..slices {
-        if wall_outer[k] > 0.0 {
-            outer[k] = wall_outer[k];
+        if wall_outer[k].1 > 0 {
+            outer[k] = wall_outer[k].0 / wall_outer[k].1 as f32;
         }
-        if wall_inner[k].is_finite() {
-            inner[k] = wall_inner[k];
+        if wall_inner[k].1 > 0 {
+            inner[k] = wall_inner[k].0 / wall_inner[k].1 as f32;
         }
     }
     let (mut explained, mut walls_seen) = (0usize, 0usize);
     for (bin, side, r) in walls {
         if let Some(median) = medians[bin][side] {
             walls_seen += 1;
-            if (r - median).abs() <= bound_m {
+            if (r - median).abs() <= tolerance_m {
                 explained += 1;
             }
         }
@@ -308,8 +324,28 @@ pub fn revolve(shell: &TriMesh, support: SupportPlane, bound_m: f32) -> Option<R
             hollow[k] = r.min(outer[k] - 2.0 * bound_m).max(0.0);
         }
     }
+    // The top: flat only as far as a face turned up was seen there (a cone's is a point, a
+    // torus's a ring), so that the top slice is not a slab as wide as its widest wall.
+    let hollow_top = hollow[slices - 1];
+    let (mut cap_inner, mut cap_outer) = (f32::INFINITY, f32::NEG_INFINITY);
+    for s in &samples {
+        if support.height(s.p) > top - dh && s.normal.dot(up) > WALL_NORMAL {
+            let r = radial(s.p).length();
+            cap_inner = cap_inner.min(r);
+            cap_outer = cap_outer.max(r);
+        }
+    }
+    let cap = if cap_outer >= cap_inner {
+        let outer_edge = cap_outer.clamp(hollow_top, outer[slices - 1]);
+        (cap_inner.clamp(hollow_top, outer_edge), outer_edge)
+    } else if hollow_top > 0.0 {
+        let middle = 0.5 * (hollow_top + outer[slices - 1]);
+        (middle, middle)
+    } else {
+        (0.0, 0.0)
+    };
     let axis_point = up * support.offset + u * centre.x + v * centre.y;
-    let profile = profile(&outer, &hollow, dh);
+    let profile = profile(&outer, &hollow, cap, dh);
     let mesh = turned(&profile, axis_point, up, u, v);
     Some(Revolved {
         mesh,
@@ -332,19 +368,22 @@ fn arc(angles: &mut [f32]) -> f32 {
 }
 
 /// The closed profile polygon in (radius, height): the outer wall up from the support through
-/// each slice's outer radius at its middle, across the top, the inner wall down through each
-/// ring's inner radius while the slices are rings, to the axis (or, rings all the way down,
-/// along the support), and down the axis (points on the axis have radius 0).
-fn profile(outer: &[f32], inner: &[f32], dh: f32) -> Vec<Vec2> {
+/// each slice's outer radius at its middle, across the top between the `cap`'s radii (inner,
+/// outer: where a face turned up was seen), the inner wall down through each ring's inner
+/// radius while the slices are rings, to the axis (or, rings all the way down, along the
+/// support), and down the axis (points on the axis have radius 0).
+fn profile(outer: &[f32], inner: &[f32], cap: (f32, f32), dh: f32) -> Vec<Vec2> {
     let n = outer.len();
     let top = n as f32 * dh;
     let middle = |k: usize| (k as f32 + 0.5) * dh;
     let mut polygon = vec![Vec2::new(outer[0], 0.0)];
     polygon.extend((0..n).map(|k| Vec2::new(outer[k], middle(k))));
-    polygon.push(Vec2::new(outer[n - 1], top));
+    polygon.push(Vec2::new(cap.1, top));
     let mut k = n;
     if inner[n - 1] > 0.0 {
-        polygon.push(Vec2::new(inner[n - 1], top));
+        polygon.push(Vec2::new(cap.0, top));
+        polygon.push(Vec2::new(inner[n - 1], middle(n - 1)));
+        k -= 1;
     }
     while k > 0 && inner[k - 1] > 0.0 {
         polygon.push(Vec2::new(inner[k - 1], middle(k - 1)));
@@ -459,7 +498,7 @@ mod tests {
         );
         let eye = Vec3::new(0.2, -0.9, 0.95);
         let shell = seen_from(&torus, eye);
-        let revolved = revolve(&shell, TABLE, 0.004).expect("a solid of revolution");
+        let revolved = revolve(&shell, TABLE, 0.004, 0.0).expect("a solid of revolution");
         let truth = MassProperties::of_closed_mesh(&torus).expect("closed");
         let got = MassProperties::of_closed_mesh(&revolved.mesh).expect("a closed solid");
         let ratio = got.volume_m3 / truth.volume_m3;
@@ -473,7 +512,7 @@ mod tests {
         assert!(revolved.mesh.is_closed());
 
         let cube = placed(&tacmesh_sim::cube(0.2), Vec3::new(0.0, 0.0, 0.1));
-        assert_eq!(revolve(&seen_from(&cube, eye), TABLE, 0.004), None);
+        assert_eq!(revolve(&seen_from(&cube, eye), TABLE, 0.004, 0.0), None);
     }
 
     /// A cylinder seen from the side and above is a disc in every slice: solid to its axis.
@@ -484,7 +523,7 @@ mod tests {
             Vec3::new(0.0, 0.0, 0.1),
         );
         let shell = seen_from(&drum, Vec3::new(0.0, -1.0, 0.8));
-        let revolved = revolve(&shell, TABLE, 0.004).expect("a solid of revolution");
+        let revolved = revolve(&shell, TABLE, 0.004, 0.0).expect("a solid of revolution");
         let truth = MassProperties::of_closed_mesh(&drum).expect("closed");
         let got = MassProperties::of_closed_mesh(&revolved.mesh).expect("closed");
         let ratio = got.volume_m3 / truth.volume_m3;

@@ -109,6 +109,52 @@ impl MomentGrid {
         self.cells.iter().map(|(&cell, m)| (cell, m))
     }
 
+    /// The means of the voxels the surface runs through (those holding at least a quarter of
+    /// the median voxel's samples), evenly thinned to at most `max_points` in (z, y, x) order
+    /// of their cells, and how rough they are: the 95th percentile of each mean's distance
+    /// from the plane through its 3 × 3 × 3 neighbourhood. Where the sensor's noise is as wide
+    /// as a voxel the means keep most of it (each voxel holds its own slice of the noise
+    /// across the surface); the roughness says how much, so a fit to them can be judged
+    /// against it.
+    pub fn surface_means(&self, max_points: usize) -> SurfaceMeans {
+        let mut counts: Vec<f64> = self.cells.values().map(|m| m.count).collect();
+        if counts.is_empty() || max_points == 0 {
+            return SurfaceMeans::default();
+        }
+        let middle = counts.len() / 2;
+        let (_, median, _) = counts.select_nth_unstable_by(middle, f64::total_cmp);
+        let least = (0.25 * *median).max(2.0);
+        let mut surface: Vec<(IVec3, &PointMoments)> = self
+            .cells
+            .iter()
+            .filter(|(_, m)| m.count >= least)
+            .map(|(&cell, m)| (cell, m))
+            .collect();
+        sort_zyx(&mut surface, |&(cell, _)| cell);
+        let step = surface.len().div_ceil(max_points).max(1);
+        let mut points = Vec::new();
+        let mut off_plane = Vec::new();
+        for &(cell, m) in surface.iter().step_by(step) {
+            let Some(mean) = m.centroid() else {
+                continue;
+            };
+            points.push(mean);
+            if let Some(plane) = self.neighbourhood(cell, 1).plane() {
+                off_plane.push((mean - plane.point).dot(plane.normal).abs());
+            }
+        }
+        let roughness_m = if off_plane.is_empty() {
+            0.0
+        } else {
+            let k = (off_plane.len() * 95 / 100).min(off_plane.len() - 1);
+            *off_plane.select_nth_unstable_by(k, f32::total_cmp).1
+        };
+        SurfaceMeans {
+            points,
+            roughness_m,
+        }
+    }
+
     pub fn get(&self, cell: IVec3) -> Option<&PointMoments> {
         self.cells.get(&cell)
     }
@@ -161,6 +207,14 @@ impl MomentGrid {
         }
         sum
     }
+}
+
+/// What [`MomentGrid::surface_means`] gives: the surface voxels' means and their roughness.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SurfaceMeans {
+    pub points: Vec<Vec3>,
+    /// The 95th percentile of the means' distances from their neighbourhoods' planes, metres.
+    pub roughness_m: f32,
 }
 
 /// Voxels with their moments in (z, y, x) order of their cells: a grid that is read in order

@@ -1,7 +1,7 @@
 //! The bodies worker: turns each published object shape into its collision body (the object's
 //! solid, convex parts, mass properties: docs/protocol.md, "Body") and publishes it, off the
 //! mesher's thread. An object that is a primitive (a box, a cylinder, a sphere, a capsule
-//! fitted to its shape) is that primitive, whole; otherwise the solid of a one-view shell is
+//! fitted to the points its shape was made from) is that primitive, whole; otherwise the solid of a one-view shell is
 //! its shadow volume along the sensor's rays to the support it stands on, flagged as a
 //! fallback, cut into convex parts by planes ([`tacmesh_physics::split_part_points`], a few
 //! milliseconds: parry's V-HACD took seconds on a real scene's proxies and had to run in a
@@ -12,8 +12,8 @@ use std::time::Instant;
 use glam::Vec3;
 use tacmesh_physics::{
     collision_proxy, convex_parts_with, primitive_of_shape, revolve, split_part_points,
-    ConvexConfig, MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind, SupportPlane,
-    PRIMITIVE_NOISE_M,
+    ConvexConfig, FusedPoints, MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind,
+    SupportPlane, PRIMITIVE_NOISE_M,
 };
 use tacmesh_protocol::{Body, BodyPrimitive, BodySolid, Encoding, Hull};
 use tacmesh_source::TriMesh;
@@ -35,6 +35,12 @@ pub struct BodyJob {
     pub support: Option<SupportPlane>,
     /// How far to grow an open shell's proxy: the shape's residual bound.
     pub margin_m: f32,
+    /// The points the shape was made from, fused (a voxel's mean each), object frame: what a
+    /// primitive is fitted to. Empty: the shape's surface instead.
+    pub fused_points: Vec<Vec3>,
+    /// How far the fused points scatter about their own surface, metres
+    /// ([`tacmesh_reconstruct::moment_grid::SurfaceMeans`]).
+    pub fused_roughness_m: f32,
 }
 
 impl ObjectJob for BodyJob {
@@ -228,14 +234,30 @@ pub fn make_body(
         return Err(BodyError::NotClosed { kind: proxy.kind });
     }
     // The proxy holds the object: a primitive must lie within it.
-    let fitted = primitive_of_shape(&job.mesh_in_object, job.support, job.margin_m, &proxy.mesh)
-        .or_else(|| {
-            let kind = held?;
-            let looser = HELD_PRIMITIVE_SLACK * (job.margin_m.max(0.0) + PRIMITIVE_NOISE_M)
-                - PRIMITIVE_NOISE_M;
-            primitive_of_shape(&job.mesh_in_object, job.support, looser, &proxy.mesh)
-                .filter(|p| p.shape.name() == kind)
-        });
+    let fused = FusedPoints {
+        points: &job.fused_points,
+        roughness_m: job.fused_roughness_m,
+    };
+    let fitted = primitive_of_shape(
+        &job.mesh_in_object,
+        Some(fused),
+        job.support,
+        job.margin_m,
+        &proxy.mesh,
+    )
+    .or_else(|| {
+        let kind = held?;
+        let looser =
+            HELD_PRIMITIVE_SLACK * (job.margin_m.max(0.0) + PRIMITIVE_NOISE_M) - PRIMITIVE_NOISE_M;
+        primitive_of_shape(
+            &job.mesh_in_object,
+            Some(fused),
+            job.support,
+            looser,
+            &proxy.mesh,
+        )
+        .filter(|p| p.shape.name() == kind)
+    });
     if let Some(primitive) = fitted {
         if primitive.mass().implausible().is_none() {
             return primitive_body(job, &primitive);
@@ -246,8 +268,8 @@ pub fn make_body(
     let bound_m = job.margin_m.max(0.0) + PRIMITIVE_NOISE_M;
     let revolved = match (proxy.kind, job.support) {
         (ProxyKind::ShadowVolume | ProxyKind::Extrusion, Some(support)) => {
-            revolve(&job.mesh_in_object, support, bound_m).filter(|r| {
-                match r.lies_within(&proxy.mesh, Some(support), bound_m) {
+            revolve(&job.mesh_in_object, support, bound_m, job.fused_roughness_m).filter(
+                |r| match r.lies_within(&proxy.mesh, Some(support), bound_m) {
                     Ok(()) => true,
                     Err(why) => {
                         tracing::debug!(
@@ -256,8 +278,8 @@ pub fn make_body(
                         );
                         false
                     }
-                }
-            })
+                },
+            )
         }
         _ => None,
     };
@@ -334,6 +356,8 @@ mod tests {
             viewpoint_in_object: Some(Vec3::new(0.0, -2.0, 1.0)),
             support: None,
             margin_m: 0.004,
+            fused_points: Vec::new(),
+            fused_roughness_m: 0.0,
         }
     }
 

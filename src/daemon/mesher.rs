@@ -159,6 +159,7 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
             .in_frame(published.world_from_object)
         });
         drop(board);
+        let fused = job.grid.surface_means(MAX_FUSED_POINTS);
         shared.body_queue.submit(BodyJob {
             object_id: job.object_id,
             shape_version: published.shape_version,
@@ -166,9 +167,15 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
             viewpoint_in_object: Some(job.viewpoint_in_object),
             support,
             margin_m: stats.max_residual_m,
+            fused_points: fused.points,
+            fused_roughness_m: fused.roughness_m,
         });
     }
 }
+
+/// The most fused points a body job carries: a primitive's fit is linear in them, and a
+/// few thousand voxels' means pin a primitive's few parameters to a millimetre or two.
+const MAX_FUSED_POINTS: usize = 4096;
 
 #[cfg(test)]
 mod tests {

@@ -38,6 +38,8 @@ use tacmesh_publish::{PublishError, Publisher, PublisherConfig};
 use tacmesh_source::{DepthSource, SourceError};
 
 pub use crate::socket_dir::default_socket_path;
+/// The daemon's own body making, for tests and benchmarks that judge what it publishes.
+pub use bodies::{make_body, BodyError, BodyJob};
 pub use config::{ConfigError, DaemonConfig};
 pub use counters::CounterSnapshot;
 pub use perception::track_config;
