@@ -393,10 +393,13 @@ def test_an_object_that_is_a_primitive_gets_a_primitive_body_where_its_shape_is(
         assert not body.solid.is_fallback
         assert body.volume_m3 == pytest.approx(volume_of(primitive), rel=1e-3), primitive
         np.testing.assert_allclose(body.centre_of_mass, primitive.centre, atol=1e-5)
-        # The seen surface is within the fit's residual of the primitive, give or take the
-        # shape's own error and a newer shape in the same frame.
+        # The shape lies on the primitive, give or take the shape's own error and a newer
+        # shape in the same frame. The primitive is fitted to the fused points, not to the
+        # shape: where the shape's top runs on past a rim the camera does not see (by up to a
+        # meshing cell, 10-18 mm on the demo's drum) it is off the primitive by that much.
         distances = surface_distances(primitive, o.vertices)
-        assert float(np.percentile(distances, 95)) < 0.015, (primitive, o.max_residual_m)
+        assert float(np.percentile(distances, 50)) < 0.005, (primitive, o.max_residual_m)
+        assert float(np.percentile(distances, 95)) < 0.025, (primitive, o.max_residual_m)
         solid = o.world_solid
         assert solid is not None
         np.testing.assert_allclose(
