@@ -327,14 +327,25 @@ pub fn revolve(
     // The top: flat only as far as a face turned up was seen there (a cone's is a point, a
     // torus's a ring), so that the top slice is not a slab as wide as its widest wall.
     let hollow_top = hollow[slices - 1];
+    // It stands at the median height of those faces: the highest point is a bump of the
+    // shell's, and a flat top there stands above the rest of what was seen.
     let (mut cap_inner, mut cap_outer) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut cap_heights = Vec::new();
     for s in &samples {
         if support.height(s.p) > top - dh && s.normal.dot(up) > WALL_NORMAL {
             let r = radial(s.p).length();
             cap_inner = cap_inner.min(r);
             cap_outer = cap_outer.max(r);
+            cap_heights.push(support.height(s.p));
         }
     }
+    let cap_height = if cap_heights.is_empty() {
+        top
+    } else {
+        let middle = cap_heights.len() / 2;
+        let (_, h, _) = cap_heights.select_nth_unstable_by(middle, f32::total_cmp);
+        h.clamp(top - 0.5 * dh, top)
+    };
     let cap = if cap_outer >= cap_inner {
         let outer_edge = cap_outer.clamp(hollow_top, outer[slices - 1]);
         (cap_inner.clamp(hollow_top, outer_edge), outer_edge)
@@ -345,7 +356,7 @@ pub fn revolve(
         (0.0, 0.0)
     };
     let axis_point = up * support.offset + u * centre.x + v * centre.y;
-    let profile = profile(&outer, &hollow, cap, dh);
+    let profile = profile(&outer, &hollow, cap, cap_height, dh);
     let mesh = turned(&profile, axis_point, up, u, v);
     Some(Revolved {
         mesh,
@@ -369,12 +380,11 @@ fn arc(angles: &mut [f32]) -> f32 {
 
 /// The closed profile polygon in (radius, height): the outer wall up from the support through
 /// each slice's outer radius at its middle, across the top between the `cap`'s radii (inner,
-/// outer: where a face turned up was seen), the inner wall down through each ring's inner
+/// outer: where a face turned up was seen) at height `top`, the inner wall down through each ring's inner
 /// radius while the slices are rings, to the axis (or, rings all the way down, along the
 /// support), and down the axis (points on the axis have radius 0).
-fn profile(outer: &[f32], inner: &[f32], cap: (f32, f32), dh: f32) -> Vec<Vec2> {
+fn profile(outer: &[f32], inner: &[f32], cap: (f32, f32), top: f32, dh: f32) -> Vec<Vec2> {
     let n = outer.len();
-    let top = n as f32 * dh;
     let middle = |k: usize| (k as f32 + 0.5) * dh;
     let mut polygon = vec![Vec2::new(outer[0], 0.0)];
     polygon.extend((0..n).map(|k| Vec2::new(outer[k], middle(k))));
@@ -390,7 +400,8 @@ fn profile(outer: &[f32], inner: &[f32], cap: (f32, f32), dh: f32) -> Vec<Vec2> 
         k -= 1;
     }
     if k > 0 {
-        polygon.push(Vec2::new(0.0, k as f32 * dh));
+        let height = if k == n { top } else { k as f32 * dh };
+        polygon.push(Vec2::new(0.0, height));
         polygon.push(Vec2::new(0.0, 0.0));
     } else {
         polygon.push(Vec2::new(inner[0], 0.0));
