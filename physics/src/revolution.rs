@@ -313,8 +313,12 @@ pub fn revolve(
         if inner[k].is_finite() && inner[k] > 2.0 * bound_m && outer[k] - inner[k] > 2.0 * bound_m {
             radius = Some(inner[k]);
         } else if let Some(r) = radius {
+            // A floor lies well inside the hollow: an upward face by its wall is the wall's
+            // own rounded top (a torus's crest beside its hole), not a bottom.
             let floor = samples.iter().any(|s| {
-                slice_of(s.p) == k && s.normal.dot(up) > WALL_NORMAL && radial(s.p).length() < r
+                slice_of(s.p) == k
+                    && s.normal.dot(up) > WALL_NORMAL
+                    && radial(s.p).length() < r - 2.0 * bound_m
             });
             if floor {
                 radius = None;

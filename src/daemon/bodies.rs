@@ -219,7 +219,7 @@ fn primitive_body(job: &BodyJob, primitive: &Primitive) -> Result<Body, BodyErro
 pub fn make_body(
     job: &BodyJob,
     held: Option<&'static str>,
-    decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
+    mut decompose: impl FnMut(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
 ) -> Result<Body, BodyError> {
     let proxy = collision_proxy(
         &job.mesh_in_object,
@@ -286,14 +286,25 @@ pub fn make_body(
     if let Some(revolved) = revolved {
         if let Ok(mass) = MassProperties::of_closed_mesh(&revolved.mesh) {
             if mass.implausible().is_none() {
-                return solid_body(
+                let body = solid_body(
                     job,
                     BodySolid::Completed,
                     revolved.mesh,
                     mass,
                     0.0,
-                    decompose,
-                );
+                    &mut decompose,
+                )?;
+                // An engine collides the hulls: where they bridge what the solid leaves open
+                // (a flat ring's hull spans a torus's hole) the completion is not what it
+                // gets, and the conservative fallback is the honest body.
+                match hulls_over_solid(&body) {
+                    Some(ratio) if ratio <= MAX_COMPLETED_HULLS_OVER_SOLID => return Ok(body),
+                    ratio => tracing::debug!(
+                        "object {}: the convex parts of its turned solid are {ratio:?}× its \
+                         volume; its body is the fallback",
+                        job.object_id
+                    ),
+                }
             }
         }
     }
@@ -306,6 +317,21 @@ pub fn make_body(
         ProxyKind::OpenShell => return Err(BodyError::NotClosed { kind: proxy.kind }),
     };
     solid_body(job, solid, proxy.mesh, mass, margin_m, decompose)
+}
+
+/// How much more than a completed solid its convex hulls may hold before the completion is
+/// dropped for the fallback (the demo's torus: 1.04–1.22× when its parts follow its hole,
+/// 1.46× when they merged across it).
+const MAX_COMPLETED_HULLS_OVER_SOLID: f64 = 1.3;
+
+/// The body's hulls' total volume over its solid's; `None` if a hull has no volume.
+fn hulls_over_solid(body: &Body) -> Option<f64> {
+    let mut total = 0.0f64;
+    for hull in &body.hulls {
+        total += f64::from(MassProperties::of_closed_mesh(&hull.mesh()).ok()?.volume_m3);
+    }
+    let ratio = total / f64::from(body.volume_m3);
+    ratio.is_finite().then_some(ratio)
 }
 
 /// The body of a closed solid: its convex parts by `decompose`, its mass properties, and the
