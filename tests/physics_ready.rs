@@ -532,9 +532,10 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
             through * 100.0,
         );
         // A primitive where the shape is one, to issue 40's targets: 0.8–1.25× the volume,
-        // the centre of mass within 15 mm, contact p95 within 10 mm and 10°. The others are
-        // still their shadow volumes (a cone's and a torus's turned solids reach out of them
-        // at this noise): closed, holding the object, never lighter than 0.7× it.
+        // the centre of mass within 15 mm, contact p95 within 10 mm and 10°. The others (the
+        // cone turned about its axis, the torus and Suzanne their shadow volumes: the torus's
+        // turned solid reaches out of its at this noise) are not there yet: closed, holding
+        // the object, never lighter than 0.7× it.
         let primitive = match shape {
             Shape::Cube => Some("box"),
             Shape::Cylinder => Some("cylinder"),
