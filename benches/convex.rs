@@ -118,17 +118,6 @@ fn inside(mesh: &TriMesh, p: Vec3) -> bool {
     solid_angle / (4.0 * std::f64::consts::PI) > 0.5
 }
 
-fn concatenated(meshes: &[TriMesh]) -> TriMesh {
-    let mut all = TriMesh::default();
-    for mesh in meshes {
-        let base = all.vertices.len() as u32;
-        all.vertices.extend(&mesh.vertices);
-        all.triangles
-            .extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
-    all
-}
-
 fn judge(mesh: &TriMesh, hulls: &[TriMesh], ms: f64, seed: u64) -> Quality {
     let mesh_volume = volume_m3(mesh);
     let hull_volume: f64 = hulls.iter().map(volume_m3).sum();
@@ -174,8 +163,8 @@ fn judge(mesh: &TriMesh, hulls: &[TriMesh], ms: f64, seed: u64) -> Quality {
     let missed_max_m = if uncovered.is_empty() {
         0.0
     } else {
-        let distances =
-            point_to_mesh_distances(&concatenated(hulls), &uncovered).expect("hulls index");
+        let distances = point_to_mesh_distances(&TriMesh::concatenated(hulls), &uncovered)
+            .expect("hulls index");
         f64::from(distances.iter().copied().fold(0.0f32, f32::max))
     };
     Quality {

@@ -493,18 +493,7 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
         // the union of the hulls.
         let surface = match &body.primitive {
             Some(primitive) => physics_primitive(primitive).mesh_with(128, 64),
-            None => {
-                let mut union = TriMesh::new(Vec::new(), Vec::new());
-                for hull in &body.hulls {
-                    let hull = hull.mesh();
-                    let base = union.vertices.len() as u32;
-                    union.vertices.extend(&hull.vertices);
-                    union
-                        .triangles
-                        .extend(hull.triangles.iter().map(|t| t.map(|i| i + base)));
-                }
-                union
-            }
+            None => TriMesh::concatenated(&body.hulls.iter().map(|h| h.mesh()).collect::<Vec<_>>()),
         };
         let contact = contact_fidelity(&truth, &surface, &ContactConfig::default())
             .expect("contact with the body")

@@ -143,16 +143,8 @@ fn body_surface(
         "the candidate has no body: it is open and no --viewpoint closes it"
     );
     let parts = convex_parts(&proxy.mesh, &ConvexConfig::default())?;
-    let mut union = tacmesh::TriMesh::new(Vec::new(), Vec::new());
-    for hull in &parts.hulls {
-        let base = union.vertices.len() as u32;
-        union.vertices.extend(&hull.vertices);
-        union
-            .triangles
-            .extend(hull.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
     Ok((
-        union,
+        tacmesh::TriMesh::concatenated(&parts.hulls),
         format!("{} hulls of the {}", parts.hulls.len(), proxy.kind.as_str()),
     ))
 }

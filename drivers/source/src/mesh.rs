@@ -21,6 +21,19 @@ impl TriMesh {
         self.triangles.is_empty()
     }
 
+    /// The meshes as one: their vertices one after another, each mesh's triangles renumbered
+    /// to its own (a union of convex hulls, as an engine collides them, for a probe).
+    pub fn concatenated<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> TriMesh {
+        let mut all = TriMesh::default();
+        for mesh in meshes {
+            let base = all.vertices.len() as u32;
+            all.vertices.extend(&mesh.vertices);
+            all.triangles
+                .extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
+        }
+        all
+    }
+
     /// Axis-aligned bounds `(min, max)` of the vertices, or `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         bounds_of(&self.vertices)
