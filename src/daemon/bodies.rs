@@ -12,8 +12,8 @@ use std::time::Instant;
 use glam::Vec3;
 use tacmesh_physics::{
     collision_proxy, convex_parts_with, primitive_of_shape, revolve, split_part_points,
-    ConvexConfig, FusedPoints, MassProperties, Primitive, PrimitiveShape, ProxyConfig, ProxyKind,
-    SupportPlane, PRIMITIVE_NOISE_M,
+    ConvexConfig, ConvexParts, FusedPoints, MassProperties, Primitive, PrimitiveShape, ProxyConfig,
+    ProxyKind, SupportPlane, PRIMITIVE_NOISE_M,
 };
 use tacmesh_protocol::{Body, BodyPrimitive, BodySolid, Encoding, Hull};
 use tacmesh_source::TriMesh;
@@ -286,25 +286,20 @@ pub fn make_body(
     if let Some(revolved) = revolved {
         if let Ok(mass) = MassProperties::of_closed_mesh(&revolved.mesh) {
             if mass.implausible().is_none() {
-                let body = solid_body(
-                    job,
-                    BodySolid::Completed,
-                    revolved.mesh,
-                    mass,
-                    0.0,
-                    &mut decompose,
-                )?;
+                let parts =
+                    convex_parts_with(&revolved.mesh, &ConvexConfig::default(), &mut decompose)?;
                 // An engine collides the hulls: where they bridge what the solid leaves open
                 // (a flat ring's hull spans a torus's hole) the completion is not what it
                 // gets, and the conservative fallback is the honest body.
-                match hulls_over_solid(&body) {
-                    Some(ratio) if ratio <= MAX_COMPLETED_HULLS_OVER_SOLID => return Ok(body),
-                    ratio => tracing::debug!(
-                        "object {}: the convex parts of its turned solid are {ratio:?}× its \
-                         volume; its body is the fallback",
-                        job.object_id
-                    ),
+                let ratio = parts.volume_ratio();
+                if ratio <= MAX_COMPLETED_HULLS_OVER_SOLID {
+                    return solid_body(job, BodySolid::Completed, revolved.mesh, mass, 0.0, &parts);
                 }
+                tracing::debug!(
+                    "object {}: the convex parts of its turned solid are {ratio:.2}× its \
+                     volume; its body is the fallback",
+                    job.object_id
+                );
             }
         }
     }
@@ -316,35 +311,25 @@ pub fn make_body(
         ProxyKind::Extrusion => (BodySolid::Extrusion, job.margin_m),
         ProxyKind::OpenShell => return Err(BodyError::NotClosed { kind: proxy.kind }),
     };
-    solid_body(job, solid, proxy.mesh, mass, margin_m, decompose)
+    let parts = convex_parts_with(&proxy.mesh, &ConvexConfig::default(), decompose)?;
+    solid_body(job, solid, proxy.mesh, mass, margin_m, &parts)
 }
 
 /// How much more than a completed solid its convex hulls may hold before the completion is
 /// dropped for the fallback (the demo's torus: 1.04–1.22× when its parts follow its hole,
 /// 1.46× when they merged across it).
-const MAX_COMPLETED_HULLS_OVER_SOLID: f64 = 1.3;
+const MAX_COMPLETED_HULLS_OVER_SOLID: f32 = 1.3;
 
-/// The body's hulls' total volume over its solid's; `None` if a hull has no volume.
-fn hulls_over_solid(body: &Body) -> Option<f64> {
-    let mut total = 0.0f64;
-    for hull in &body.hulls {
-        total += f64::from(MassProperties::of_closed_mesh(&hull.mesh()).ok()?.volume_m3);
-    }
-    let ratio = total / f64::from(body.volume_m3);
-    ratio.is_finite().then_some(ratio)
-}
-
-/// The body of a closed solid: its convex parts by `decompose`, its mass properties, and the
-/// solid itself on the wire unless it is the shape.
+/// The body of a closed solid: its convex `parts`, its mass properties, and the solid itself
+/// on the wire unless it is the shape.
 fn solid_body(
     job: &BodyJob,
     solid: BodySolid,
     mesh: TriMesh,
     mass: MassProperties,
     margin_m: f32,
-    decompose: impl FnOnce(&TriMesh, &ConvexConfig) -> Result<Vec<Vec<Vec3>>, String>,
+    parts: &ConvexParts,
 ) -> Result<Body, BodyError> {
-    let parts = convex_parts_with(&mesh, &ConvexConfig::default(), decompose)?;
     let hulls = parts
         .hulls
         .iter()
