@@ -299,17 +299,19 @@ pub fn surface_points(mesh: &TriMesh) -> Vec<Vec3> {
     points
 }
 
+/// The `per_cent`th percentile of `values` (nearest rank, reordering them); `None` if empty.
+pub(crate) fn percentile(values: &mut [f32], per_cent: usize) -> Option<f32> {
+    let k = (values.len() * per_cent / 100).min(values.len().checked_sub(1)?);
+    Some(*values.select_nth_unstable_by(k, f32::total_cmp).1)
+}
+
 /// The 95th percentile of the points' distances from `primitive`'s surface.
 fn residual(primitive: &Primitive, points: &[Vec3]) -> f32 {
     let mut d: Vec<f32> = points
         .iter()
         .map(|&p| primitive.signed_distance(p).abs())
         .collect();
-    if d.is_empty() {
-        return f32::INFINITY;
-    }
-    let k = (d.len() * 95 / 100).min(d.len() - 1);
-    *d.select_nth_unstable_by(k, f32::total_cmp).1
+    percentile(&mut d, 95).unwrap_or(f32::INFINITY)
 }
 
 /// Two unit vectors spanning the support's plane.
@@ -535,11 +537,7 @@ fn sphere(points: &[Vec3], support: Option<SupportPlane>) -> Option<Primitive> {
 /// highest point is the noise's, not the object's).
 fn top_height(points: &[Vec3], support: SupportPlane) -> f32 {
     let mut heights: Vec<f32> = points.iter().map(|&p| support.height(p)).collect();
-    if heights.is_empty() {
-        return f32::NAN;
-    }
-    let k = (heights.len() * 99 / 100).min(heights.len() - 1);
-    *heights.select_nth_unstable_by(k, f32::total_cmp).1
+    percentile(&mut heights, 99).unwrap_or(f32::NAN)
 }
 
 /// A box standing on the support: its footprint the smallest rectangle around the points
@@ -812,6 +810,16 @@ pub struct FusedPoints<'a> {
     pub roughness_m: f32,
 }
 
+/// How much a fit may stray for data that scatter `roughness_m` about their surface: that
+/// much, up to a metre; NaN or negative counts as none.
+pub(crate) fn scatter_allowance_m(roughness_m: f32) -> f32 {
+    if roughness_m > 0.0 {
+        roughness_m.min(1.0)
+    } else {
+        0.0
+    }
+}
+
 /// What a primitive may be off a shape beyond the shape's own residual bound, metres: the
 /// sensor's noise at a metre or two, which the fused surface keeps some of.
 pub const PRIMITIVE_NOISE_M: f32 = 0.003;
@@ -845,7 +853,7 @@ pub fn primitive_of_shape(
     let (points, fit_bound_m) = match fused.filter(|f| !f.points.is_empty()) {
         Some(fused) => (
             fused.points.to_vec(),
-            bound_m + fused.roughness_m.clamp(0.0, 1.0),
+            bound_m + scatter_allowance_m(fused.roughness_m),
         ),
         None => (surface_points(mesh), bound_m),
     };

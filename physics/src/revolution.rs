@@ -138,12 +138,7 @@ pub fn revolve(
     if bound_m.is_nan() || bound_m <= 0.0 {
         return None;
     }
-    let tolerance_m = bound_m
-        + if scatter_m > 0.0 {
-            scatter_m.min(1.0)
-        } else {
-            0.0
-        };
+    let tolerance_m = bound_m + crate::primitive::scatter_allowance_m(scatter_m);
     let u = up.any_orthonormal_vector();
     let v = up.cross(u);
     let flat = |p: Vec3| Vec2::new(p.dot(u), p.dot(v));
@@ -343,13 +338,8 @@ pub fn revolve(
             cap_heights.push(support.height(s.p));
         }
     }
-    let cap_height = if cap_heights.is_empty() {
-        top
-    } else {
-        let middle = cap_heights.len() / 2;
-        let (_, h, _) = cap_heights.select_nth_unstable_by(middle, f32::total_cmp);
-        h.clamp(top - 0.5 * dh, top)
-    };
+    let cap_height = crate::primitive::percentile(&mut cap_heights, 50)
+        .map_or(top, |h| h.clamp(top - 0.5 * dh, top));
     let cap = if cap_outer >= cap_inner {
         let outer_edge = cap_outer.clamp(hollow_top, outer[slices - 1]);
         (cap_inner.clamp(hollow_top, outer_edge), outer_edge)
