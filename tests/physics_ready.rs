@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use tacmesh::glam::{DVec3, Vec3};
 use tacmesh::physics::orientation::{orientation, signed_volume_m3};
 use tacmesh::physics::proxy::{collision_proxy, ProxyConfig, ProxyKind, SupportPlane};
-use tacmesh::pipeline::{mesh_cloud, MeshConfig};
+use tacmesh::pipeline::{mesh_cloud, MeshConfig, MeshReport};
 use tacmesh::sim::{contact_fidelity, sample_cloud, ContactConfig, SampleConfig, Shape};
 use tacmesh::{PointCloud, TriMesh};
 
@@ -292,6 +292,53 @@ fn the_outward_judge_tells_an_inverted_mesh() {
     assert!((winding_number(&truth, DVec3::ZERO) - 1.0).abs() < 1e-6);
 }
 
+/// One of the six shapes standing on a table, seen once by a camera at `eye`.
+struct OnTable {
+    truth: TriMesh,
+    /// The table: the plane under the shape's bottom.
+    table: SupportPlane,
+    /// What the camera sees: 30,000 points on the faces turned to it, none on the underside.
+    cloud: PointCloud,
+    /// The cloud meshed by the default pipeline.
+    shell: TriMesh,
+    report: MeshReport,
+}
+
+fn seen_on_a_table(shape: Shape, noise_mm: f32, seed: u64, eye: Vec3) -> OnTable {
+    let truth = shape.mesh();
+    // The shapes fit a 1 m box centred on the origin: the table is its bottom.
+    let bottom = truth
+        .vertices
+        .iter()
+        .map(|v| v.z)
+        .fold(f32::INFINITY, f32::min);
+    let case = Case {
+        shape,
+        noise_mm,
+        points: 30_000,
+        seed,
+        viewpoint: Some(eye),
+    };
+    // The table hides the shape's underside from any camera: no points there.
+    let mut cloud = front_facing_cloud(&truth, eye, &case);
+    cloud.points.retain(|p| p.z > bottom + 0.01);
+    let config = MeshConfig {
+        viewpoint: Some(eye),
+        ..MeshConfig::default()
+    };
+    let (shell, report) = mesh_cloud(&cloud, &config).expect("meshing a one-view shell");
+    OnTable {
+        truth,
+        table: SupportPlane {
+            normal: Vec3::Z,
+            offset: bottom,
+        },
+        cloud,
+        shell,
+        report,
+    }
+}
+
 /// The one-view shells of the six shapes standing on a table, seen from 20° above it: each
 /// proxy is closed, holds the true object (probes from any side stop at or before it), and is
 /// not absurdly larger. `cargo test --release --test tests -- physics_ready::proxies
@@ -310,32 +357,14 @@ fn proxies_of_one_view_shells_are_closed_and_hold_the_object() {
     );
     eprintln!("|---|---:|---|---:|---:|---:|---|---|");
     for shape in Shape::ALL {
-        let truth = shape.mesh();
-        // The shapes fit a 1 m box centred on the origin: the table is its bottom.
-        let bottom = truth
-            .vertices
-            .iter()
-            .map(|v| v.z)
-            .fold(f32::INFINITY, f32::min);
-        let table = SupportPlane {
-            normal: Vec3::Z,
-            offset: bottom,
-        };
-        let case = Case {
-            shape,
-            noise_mm: 10.0,
-            points: 30_000,
-            seed: 301,
-            viewpoint: Some(eye),
-        };
-        // The table hides the shape's underside from any camera: no points there.
-        let mut cloud = front_facing_cloud(&truth, eye, &case);
-        cloud.points.retain(|p| p.z > bottom + 0.01);
-        let config = MeshConfig {
-            viewpoint: Some(eye),
-            ..MeshConfig::default()
-        };
-        let (shell, report) = mesh_cloud(&cloud, &config).expect("meshing a one-view shell");
+        let OnTable {
+            truth,
+            table,
+            shell,
+            report,
+            ..
+        } = seen_on_a_table(shape, 10.0, 301, eye);
+        let bottom = table.offset;
         // The daemon's margin: the residual bound the shell was simplified to.
         let config = ProxyConfig {
             margin_m: report.max_residual_bound_m,
@@ -447,30 +476,13 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
     eprintln!("|---|---|---:|---:|---|---:|");
     let mut failures = Vec::new();
     for shape in Shape::ALL {
-        let truth = shape.mesh();
-        let bottom = truth
-            .vertices
-            .iter()
-            .map(|v| v.z)
-            .fold(f32::INFINITY, f32::min);
-        let table = SupportPlane {
-            normal: Vec3::Z,
-            offset: bottom,
-        };
-        let case = Case {
-            shape,
-            noise_mm: 20.0,
-            points: 30_000,
-            seed: 311,
-            viewpoint: Some(eye),
-        };
-        let mut cloud = front_facing_cloud(&truth, eye, &case);
-        cloud.points.retain(|p| p.z > bottom + 0.01);
-        let config = MeshConfig {
-            viewpoint: Some(eye),
-            ..MeshConfig::default()
-        };
-        let (shell, report) = mesh_cloud(&cloud, &config).expect("meshing a one-view shell");
+        let OnTable {
+            truth,
+            table,
+            cloud,
+            shell,
+            report,
+        } = seen_on_a_table(shape, 20.0, 311, eye);
         let mut grid = tacmesh::reconstruct::moment_grid::MomentGrid::new(report.voxel_size_m);
         grid.integrate(&cloud.points);
         let fused = grid.surface_means(4096);
