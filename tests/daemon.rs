@@ -472,7 +472,7 @@ fn static_tabletop_objects_get_accurate_small_meshes_and_stop_being_remeshed() {
             );
         }
         assert!(
-            (1..=8).contains(&body.hulls.len()),
+            (1..=tacmesh::protocol::MAX_HULLS).contains(&body.hulls.len()),
             "{} hulls",
             body.hulls.len()
         );

@@ -394,8 +394,8 @@ fn check_conversation_and_times(read: &Read1, run: Duration) {
 
 /// Every object gets collision bodies (docs/protocol.md, "Body"): each follows a Shape of its
 /// object, names a version it has published and not one from before a `new_frame` Shape; its
-/// proxy is closed with the body's volume, or the shape itself when that is closed; at most 8
-/// hulls. A compact subscriber gets compact bodies; one that asked for supports only, none.
+/// proxy is closed with the body's volume, or the shape itself when that is closed; at most
+/// the wire's 16 hulls. A compact subscriber gets compact bodies; one that asked for supports only, none.
 fn check_bodies(full: &Read1, compact: &Read1, supports_only: &Read1) {
     use tacmesh::physics::orientation::signed_volume_m3;
     let mut scene = Scene::new();
@@ -422,7 +422,7 @@ fn check_bodies(full: &Read1, compact: &Read1, supports_only: &Read1) {
             held.frame_since_version
         );
         assert!(
-            (1..=8).contains(&body.hulls.len()),
+            (1..=tacmesh::protocol::MAX_HULLS).contains(&body.hulls.len()),
             "{} hulls",
             body.hulls.len()
         );

@@ -268,8 +268,8 @@ pub fn make_body(
     let bound_m = job.margin_m.max(0.0) + PRIMITIVE_NOISE_M;
     let revolved = match (proxy.kind, job.support) {
         (ProxyKind::ShadowVolume | ProxyKind::Extrusion, Some(support)) => {
-            revolve(&job.mesh_in_object, support, bound_m, job.fused_roughness_m).filter(
-                |r| match r.lies_within(&proxy.mesh, Some(support), bound_m) {
+            revolve(&job.mesh_in_object, Some(fused), support, bound_m).filter(|r| {
+                match r.lies_within(&proxy.mesh, Some(support), bound_m) {
                     Ok(()) => true,
                     Err(why) => {
                         tracing::debug!(
@@ -278,16 +278,29 @@ pub fn make_body(
                         );
                         false
                     }
-                },
-            )
+                }
+            })
         }
         _ => None,
     };
     if let Some(revolved) = revolved {
         if let Ok(mass) = MassProperties::of_closed_mesh(&revolved.mesh) {
             if mass.implausible().is_none() {
-                let parts =
-                    convex_parts_with(&revolved.mesh, &ConvexConfig::default(), &mut decompose)?;
+                // Its parts follow its axis (wedges around a hole), up to the wire's most
+                // hulls, merged only to fit in them; the plane cuts if the profile is not
+                // one its bands cut.
+                let by_axis = revolved.part_points(TURNED_PARTS_TOLERANCE * bound_m);
+                let parts = if by_axis.is_empty() {
+                    convex_parts_with(&revolved.mesh, &ConvexConfig::default(), &mut decompose)?
+                } else {
+                    let config = ConvexConfig {
+                        max_hulls: tacmesh_protocol::MAX_HULLS,
+                        max_hull_vertices: tacmesh_protocol::MAX_HULL_VERTICES,
+                        concavity: 0.0,
+                        ..ConvexConfig::default()
+                    };
+                    convex_parts_with(&revolved.mesh, &config, |_, _| Ok(by_axis))?
+                };
                 // An engine collides the hulls: where they bridge what the solid leaves open
                 // (a flat ring's hull spans a torus's hole) the completion is not what it
                 // gets, and the conservative fallback is the honest body.
@@ -314,6 +327,10 @@ pub fn make_body(
     let parts = convex_parts_with(&proxy.mesh, &ConvexConfig::default(), decompose)?;
     solid_body(job, solid, proxy.mesh, mass, margin_m, &parts)
 }
+
+/// How far, as a share of the residual bound, a turned solid's convex part may bulge past
+/// the solid where its profile's bands are joined into one piece.
+const TURNED_PARTS_TOLERANCE: f32 = 1.0;
 
 /// How much more than a completed solid its convex hulls may hold before the completion is
 /// dropped for the fallback (the demo's torus: 1.04–1.22× when its parts follow its hole,
