@@ -78,13 +78,14 @@ impl Revolved {
     /// profile cut into bands at its vertices' heights, neighbouring bands joined while their
     /// union stays convex within `tolerance_m`; a piece that reaches the axis is turned whole
     /// (a convex solid: a cone, a drum), a piece off it (a torus's ring, a mug's wall) is cut
-    /// into wedges, one for each side of [`Self::mesh`], each exactly the hull of its two ends
-    /// (a convex polygon turned through a wedge is the hull of its two end copies). Empty when
-    /// the profile is not one the bands can cut (two walls at one height on a side).
+    /// into wedges, as narrow as `max_parts` allows (one side of [`Self::mesh`] each at most;
+    /// a convex polygon turned through a wedge lies within the hull of its copies at the
+    /// wedge's sides). Empty when the profile is not one the bands can cut (two walls at one
+    /// height on a side) or needs more parts.
     ///
     /// Why not the plane cuts every other solid gets: they know nothing of the axis, and on a
     /// torus a cut that leaves a flat ring of it as one part spans the hole with its hull.
-    pub fn part_points(&self, tolerance_m: f32) -> Vec<Vec<Vec3>> {
+    pub fn part_points(&self, tolerance_m: f32, max_parts: usize) -> Vec<Vec<Vec3>> {
         let Some(pieces) = convex_pieces(&self.profile, tolerance_m.max(0.0)) else {
             return Vec::new();
         };
@@ -93,28 +94,54 @@ impl Revolved {
             let a = std::f32::consts::TAU * (i % AROUND) as f32 / AROUND as f32;
             self.axis_point + self.axis * q.y + (u * a.cos() + v * a.sin()) * q.x
         };
-        let mut parts = Vec::new();
-        for piece in pieces {
+        // Neighbouring pieces off the axis go round together, wedge by wedge (the hull of a
+        // wedge of both bridges only the small dent between them), so that the parts fit in
+        // `max_parts` with wedges as narrow as they can be.
+        let mut turned_whole: Vec<&ProfilePiece> = Vec::new();
+        let mut rings: Vec<Vec<Vec2>> = Vec::new();
+        let mut last_off_axis = false;
+        for piece in &pieces {
             if piece.on_axis {
-                let mut points = Vec::new();
-                for &q in &piece.right {
-                    if q.x <= 1e-7 {
-                        points.push(at(q, 0));
-                    } else {
-                        points.extend((0..AROUND).map(|i| at(q, i)));
-                    }
-                }
-                parts.push(points);
+                turned_whole.push(piece);
             } else {
-                let outline: Vec<Vec2> = piece.right.iter().chain(&piece.left).copied().collect();
-                for i in 0..AROUND {
-                    parts.push(
-                        outline
-                            .iter()
-                            .flat_map(|&q| [at(q, i), at(q, i + 1)])
-                            .collect(),
-                    );
+                let outline = piece.right.iter().chain(&piece.left).copied();
+                match rings.last_mut() {
+                    Some(ring) if last_off_axis => ring.extend(outline),
+                    _ => rings.push(outline.collect()),
                 }
+            }
+            last_off_axis = !piece.on_axis;
+        }
+        let room = max_parts.saturating_sub(turned_whole.len());
+        if !rings.is_empty() && room < rings.len() {
+            return Vec::new();
+        }
+        // As many wedges as fit, a divisor of the sides around.
+        let mut wedges = AROUND;
+        while wedges > 1 && rings.len() * wedges as usize > room {
+            wedges /= 2;
+        }
+        let span = AROUND / wedges;
+        let mut parts = Vec::new();
+        for piece in turned_whole {
+            let mut points = Vec::new();
+            for &q in &piece.right {
+                if q.x <= 1e-7 {
+                    points.push(at(q, 0));
+                } else {
+                    points.extend((0..AROUND).map(|i| at(q, i)));
+                }
+            }
+            parts.push(points);
+        }
+        for ring in &rings {
+            for w in 0..wedges {
+                parts.push(
+                    ring.iter()
+                        .flat_map(|&q| (w * span..=(w + 1) * span).map(move |i| (q, i)))
+                        .map(|(q, i)| at(q, i))
+                        .collect(),
+                );
             }
         }
         parts
@@ -317,7 +344,7 @@ fn common_centre(
 const MAX_WALL_POINTS: usize = 1024;
 
 /// Each of `points` (at most [`MAX_WALL_POINTS`], evenly thinned) with the normal of the
-/// nearest of the shell's `samples` (a brute-force search: a few hundred samples).
+/// nearest of the shell's `samples` (a brute-force search: a shape has hundreds of faces).
 fn with_nearest_normals(points: &[Vec3], samples: &[Sample]) -> Vec<Sample> {
     if samples.is_empty() {
         return Vec::new();
@@ -830,8 +857,8 @@ mod tests {
         );
         let shell = seen_from(&torus, Vec3::new(0.2, -0.9, 0.95));
         let revolved = revolve(&shell, None, TABLE, 0.004).expect("a solid of revolution");
-        let parts = revolved.part_points(0.001);
-        assert!(parts.len() >= AROUND as usize, "{} parts", parts.len());
+        let parts = revolved.part_points(0.001, 16);
+        assert_eq!(parts.len(), 16);
         let config = crate::ConvexConfig {
             max_hulls: 16,
             concavity: 0.0,
@@ -858,7 +885,7 @@ mod tests {
         );
         let shell = seen_from(&drum, Vec3::new(0.0, -1.0, 0.8));
         let revolved = revolve(&shell, None, TABLE, 0.004).expect("a solid of revolution");
-        assert_eq!(revolved.part_points(0.001).len(), 1);
+        assert_eq!(revolved.part_points(0.001, 16).len(), 1);
     }
 
     /// Half-turns of two walls of different radii about (0.3, -0.2), seen from one side and

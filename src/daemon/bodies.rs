@@ -286,10 +286,12 @@ pub fn make_body(
     if let Some(revolved) = revolved {
         if let Ok(mass) = MassProperties::of_closed_mesh(&revolved.mesh) {
             if mass.implausible().is_none() {
-                // Its parts follow its axis (wedges around a hole), up to the wire's most
-                // hulls, merged only to fit in them; the plane cuts if the profile is not
-                // one its bands cut.
-                let by_axis = revolved.part_points(TURNED_PARTS_TOLERANCE * bound_m);
+                // Its parts follow its axis (wedges around a hole), as many as the wire
+                // carries; the plane cuts if the profile is not one its bands cut.
+                let by_axis = revolved.part_points(
+                    TURNED_PARTS_TOLERANCE * bound_m,
+                    tacmesh_protocol::MAX_HULLS,
+                );
                 let parts = if by_axis.is_empty() {
                     convex_parts_with(&revolved.mesh, &ConvexConfig::default(), &mut decompose)?
                 } else {
