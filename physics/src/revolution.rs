@@ -344,20 +344,59 @@ fn common_centre(
 const MAX_WALL_POINTS: usize = 1024;
 
 /// Each of `points` (at most [`MAX_WALL_POINTS`], evenly thinned) with the normal of the
-/// nearest of the shell's `samples` (a brute-force search: a shape has hundreds of faces).
-fn with_nearest_normals(points: &[Vec3], samples: &[Sample]) -> Vec<Sample> {
-    if samples.is_empty() {
+/// nearest of the shell's `samples`: looked up in a grid of cells `cell_m` wide (the nearest
+/// within one cell is the nearest of all; farther, all samples are searched). A room's shell
+/// has thousands of samples: a search of them all for every point took 40 ms a body.
+fn with_nearest_normals(points: &[Vec3], samples: &[Sample], cell_m: f32) -> Vec<Sample> {
+    if samples.is_empty() || cell_m.is_nan() || cell_m <= 0.0 || cell_m.is_infinite() {
         return Vec::new();
     }
+    let cell_of = |p: Vec3| {
+        let c = (p / cell_m).floor();
+        // Far beyond any scene: clamped, so the key is always defined (a clamped cell is
+        // only a coarser one, and the search below stays exact).
+        let c = c.clamp(Vec3::splat(-1e6), Vec3::splat(1e6));
+        (c.x as i32, c.y as i32, c.z as i32)
+    };
+    let mut grid: rustc_hash::FxHashMap<(i32, i32, i32), Vec<usize>> =
+        rustc_hash::FxHashMap::default();
+    for (i, s) in samples.iter().enumerate() {
+        if s.p.is_finite() {
+            grid.entry(cell_of(s.p)).or_default().push(i);
+        }
+    }
+    let nearest_of_all = |p: Vec3| {
+        samples
+            .iter()
+            .min_by(|a, b| a.p.distance_squared(p).total_cmp(&b.p.distance_squared(p)))
+    };
     let step = points.len().div_ceil(MAX_WALL_POINTS).max(1);
     points
         .iter()
         .step_by(step)
         .filter(|p| p.is_finite())
         .filter_map(|&p| {
-            let nearest = samples
-                .iter()
-                .min_by(|a, b| a.p.distance_squared(p).total_cmp(&b.p.distance_squared(p)))?;
+            let (x, y, z) = cell_of(p);
+            let mut best: Option<(f32, usize)> = None;
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let Some(near) = grid.get(&(x + dx, y + dy, z + dz)) else {
+                            continue;
+                        };
+                        for &i in near {
+                            let d = samples[i].p.distance_squared(p);
+                            if best.is_none_or(|(b, _)| d < b) {
+                                best = Some((d, i));
+                            }
+                        }
+                    }
+                }
+            }
+            let nearest = match best {
+                Some((d, i)) if d <= cell_m * cell_m => &samples[i],
+                _ => nearest_of_all(p)?,
+            };
             Some(Sample {
                 p,
                 normal: nearest.normal,
@@ -476,7 +515,7 @@ pub fn revolve(
     };
     centres.clear();
     let wall_samples = fused
-        .map(|f| with_nearest_normals(f.points, &samples))
+        .map(|f| with_nearest_normals(f.points, &samples, bound_m))
         .filter(|w| w.len() >= 2 * MIN_SLICE_POINTS)
         .unwrap_or_else(|| samples.clone());
     // Then the centre every wall's height keeps one radius about best (geometric least
