@@ -470,10 +470,10 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
 
     let eye = Vec3::new(1.5, -2.0, 1.0);
     eprintln!(
-        "| shape | body | volume ÷ true | centre of mass off, mm | contact from every side, p95: \
-         first contact mm / normal ° | probes through it |"
+        "| shape | body | volume ÷ true | centre of mass off, mm | principal inertia ÷ true | \
+         contact from every side, p95: first contact mm / normal ° | probes through it |"
     );
-    eprintln!("|---|---|---:|---:|---|---:|");
+    eprintln!("|---|---|---:|---:|---|---|---:|");
     let mut failures = Vec::new();
     for shape in Shape::ALL {
         let OnTable {
@@ -520,14 +520,33 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
         let off_mm = true_mass
             .as_ref()
             .map(|m| f64::from(body.centre_of_mass.distance(m.centre_of_mass)) * 1e3);
+        // The principal moments, smallest first, each over the truth's: the lowest and the
+        // highest of the three ratios.
+        let inertia = true_mass.as_ref().map(|m| {
+            let got = MassProperties {
+                volume_m3: body.volume_m3,
+                centre_of_mass: body.centre_of_mass,
+                inertia: body.inertia,
+            }
+            .principal_moments();
+            let ratios = got
+                .iter()
+                .zip(m.principal_moments())
+                .map(|(g, t)| f64::from(g / t));
+            (
+                ratios.clone().fold(f64::INFINITY, f64::min),
+                ratios.fold(0.0, f64::max),
+            )
+        });
         let what = match &body.primitive {
             Some(p) => physics_primitive(p).shape.name().to_owned(),
             None => format!("{} ({} hulls)", body.solid.as_str(), body.hulls.len()),
         };
         eprintln!(
-            "| {shape:?} | {what} | {} | {} | {:.1} / {:.1} | {:.1} % |",
+            "| {shape:?} | {what} | {} | {} | {} | {:.1} / {:.1} | {:.1} % |",
             ratio.map_or("–".to_owned(), |r| format!("{r:.2}")),
             off_mm.map_or("–".to_owned(), |m| format!("{m:.0}")),
+            inertia.map_or("–".to_owned(), |(lo, hi)| format!("{lo:.2}–{hi:.2}")),
             contact.first_contact_m.p95 * 1e3,
             contact.normal_deg.p95,
             through * 100.0,
@@ -548,6 +567,7 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
                 what == kind
                     && ratio.is_some_and(|r| (0.8..=1.25).contains(&r))
                     && off_mm.is_some_and(|m| m <= 15.0)
+                    && inertia.is_some_and(|(lo, hi)| lo >= 0.7 && hi <= 1.4)
                     && contact.first_contact_m.p95 <= 0.010
                     && contact.normal_deg.p95 <= 10.0
             }
@@ -555,12 +575,14 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
                 body.solid == BodySolid::Completed
                     && ratio.is_some_and(|r| (0.7..=1.5).contains(&r))
                     && off_mm.is_some_and(|m| m <= 20.0)
+                    && inertia.is_some_and(|(lo, hi)| lo >= 0.7 && hi <= 1.5)
             }
             (None, _) => body.solid.is_fallback(),
         };
         if !on_target || through > 0.05 {
             failures.push(format!(
-                "{shape:?}: {what}, {ratio:?}× its volume, centre {off_mm:?} mm off, contact \
+                "{shape:?}: {what}, {ratio:?}× its volume, centre {off_mm:?} mm off, inertia \
+                 {inertia:?}×, contact \
                  p95 {:.1} mm / {:.1}°, {:.1} % of the probes through it",
                 contact.first_contact_m.p95 * 1e3,
                 contact.normal_deg.p95,

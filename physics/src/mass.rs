@@ -211,9 +211,7 @@ impl MassProperties {
         if asymmetry > 1e-4 * scale {
             return Some("its inertia is not symmetric".to_owned());
         }
-        let m = parry3d::math::Mat3::from_cols_array_2d(&i);
-        let moments = parry3d::math::SymmetricEigen3::new(m).eigenvalues;
-        let [a, b, c] = moments.to_array();
+        let [a, b, c] = self.principal_moments();
         let tolerance = 1e-5 * scale;
         if a.min(b).min(c) <= 0.0 {
             return Some(format!(
@@ -226,6 +224,17 @@ impl MassProperties {
             ));
         }
         None
+    }
+
+    /// The inertia's principal moments (its eigenvalues), smallest first, m⁵: what two
+    /// bodies' inertias are compared by whatever their frames.
+    pub fn principal_moments(&self) -> [f32; 3] {
+        let m = parry3d::math::Mat3::from_cols_array_2d(&self.inertia);
+        let mut moments = parry3d::math::SymmetricEigen3::new(m)
+            .eigenvalues
+            .to_array();
+        moments.sort_by(f32::total_cmp);
+        moments
     }
 
     pub fn mass_kg(&self, density_kg_m3: f32) -> f32 {

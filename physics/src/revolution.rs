@@ -626,6 +626,13 @@ pub fn revolve(
         );
         return None;
     }
+    mirror_below_the_widest(&mut outer, &mut inner, &wall_outer, &wall_inner, dh);
+    tracing::trace!(
+        "turning: slices {slices} of {dh:.4} m, outer {outer:?} (walls {:?}), inner {inner:?} \
+         (walls {:?})",
+        wall_outer.iter().map(|w| w.1).collect::<Vec<_>>(),
+        wall_inner.iter().map(|w| w.1).collect::<Vec<_>>()
+    );
     // Slices with nothing seen take their neighbours' radii.
     for k in 0..slices {
         if outer[k] <= 0.0 {
@@ -704,6 +711,56 @@ pub fn revolve(
         profile,
         across: (u, v),
     })
+}
+
+/// The slices below the lowest one with a wall seen (`walls_*[k].1`: how many of its bins had
+/// walls) completed by a mirror plane across the axis at half the object's height, when the
+/// seen outer wall is widest there (within a slice and a half): each takes the radii at its
+/// mirror height, where that height was seen. An object resting on its support that is its
+/// own mirror image across a level plane has that plane at half its height; one widest at the
+/// lowest slice seen may widen on below it, and is left alone. A torus seen from
+/// above shows its upper half; its lower half is that half upside down, not a ring as wide as
+/// its widest, filled down to the table. An object widest elsewhere keeps its slices.
+fn mirror_below_the_widest(
+    outer: &mut [f32],
+    inner: &mut [f32],
+    walls_outer: &[(f32, u32)],
+    walls_inner: &[(f32, u32)],
+    dh: f32,
+) {
+    let n = outer.len();
+    let seen = |k: usize| walls_outer[k].1 > 0;
+    let middle = |k: usize| (k as f32 + 0.5) * dh;
+    let Some(lowest) = (0..n).find(|&k| seen(k)) else {
+        return;
+    };
+    let Some(widest) = (0..n)
+        .filter(|&k| seen(k))
+        .max_by(|&a, &b| outer[a].total_cmp(&outer[b]))
+    else {
+        return;
+    };
+    let plane = 0.5 * n as f32 * dh;
+    // Widest at the lowest slice seen, the object may go on widening below it (a cone).
+    if lowest == 0 || widest == lowest || (middle(widest) - plane).abs() > 1.5 * dh {
+        return;
+    }
+    // The radii at a height, between the slices' middles, from seen slices only.
+    let at = |radii: &[f32], walls: &[(f32, u32)], h: f32| -> Option<f32> {
+        let x = h / dh - 0.5;
+        let k = x.floor().max(0.0) as usize;
+        let t = (x - k as f32).clamp(0.0, 1.0);
+        let (a, b) = (k.min(n - 1), (k + 1).min(n - 1));
+        (walls[a].1 > 0 && walls[b].1 > 0).then(|| radii[a] + (radii[b] - radii[a]) * t)
+    };
+    let (seen_outer, seen_inner) = (outer.to_vec(), inner.to_vec());
+    for k in 0..lowest {
+        if let Some(r) = at(&seen_outer, walls_outer, 2.0 * plane - middle(k)) {
+            outer[k] = r;
+            inner[k] =
+                at(&seen_inner, walls_inner, 2.0 * plane - middle(k)).unwrap_or(f32::INFINITY);
+        }
+    }
 }
 
 /// `radii` smoothed in place by a [1, 2, 1] / 4 kernel, its two ends kept.
@@ -987,6 +1044,28 @@ mod tests {
         ];
         let pieces = convex_pieces(&bottle, 0.001).expect("cut");
         assert_eq!(pieces.len(), 2, "{pieces:?}");
+    }
+
+    /// A ring's slices seen from its middle up (radii widest at half its height) are mirrored
+    /// into the unseen slices below; a cone's (widest at its foot, where nothing was seen) keep
+    /// theirs.
+    #[test]
+    fn unseen_lower_slices_mirror_the_upper_half() {
+        let walls = |seen: &[bool]| -> Vec<(f32, u32)> {
+            seen.iter().map(|&s| (0.0, u32::from(s))).collect()
+        };
+        let seen = walls(&[false, false, true, true, true, true]);
+        let mut outer = vec![0.5, 0.5, 0.48, 0.5, 0.48, 0.42];
+        let mut inner = vec![0.2, 0.2, 0.32, 0.3, 0.32, 0.38];
+        mirror_below_the_widest(&mut outer, &mut inner, &seen, &seen, 0.1);
+        // Slice 0 (middle 0.05) mirrors 0.55 (slice 5), slice 1 (0.15) mirrors 0.45 (slice 4).
+        assert_eq!(&outer[..2], &[0.42, 0.48]);
+        assert_eq!(&inner[..2], &[0.38, 0.32]);
+
+        let mut outer = vec![0.5, 0.5, 0.4, 0.3, 0.2, 0.1];
+        let mut inner = vec![0.0; 6];
+        mirror_below_the_widest(&mut outer, &mut inner, &seen, &seen, 0.1);
+        assert_eq!(outer[0], 0.5);
     }
 
     /// A cylinder seen from the side and above is a disc in every slice: solid to its axis.
