@@ -375,14 +375,31 @@ fn collision_parts(proxy: Proxy) -> Result<(Vec<TriMesh>, MassProperties), Strin
     Ok((parts.hulls, parts.mesh_mass))
 }
 
+/// One object meshed offline, for [`offline_scene`], in the cloud's frame.
+#[derive(Debug, Clone)]
+pub struct OfflineObject {
+    /// Its id (from 1).
+    pub id: u64,
+    pub mesh: TriMesh,
+    /// Its simplification's residual bound, metres.
+    pub residual_m: f32,
+    /// The points it was meshed from, and the voxel they were fused in: what its primitive is
+    /// fitted to and its walls measured on, as the daemon does.
+    pub points: Vec<Vec3>,
+    pub voxel_m: f32,
+}
+
 /// A physics scene of meshes made offline (`tacmesh mesh --mjcf/--sdf/--urdf`): each object's
 /// mesh and each support's outline in one frame (the cloud's), as the daemon would publish
-/// them with identity poses, through the same [`PhysicsScene`] a subscriber keeps: each object
-/// with its id (from 1) and its simplification bound. With `free`, an object that stands on no support is
-/// free rather than static (one object meshed alone, for the user to place).
+/// them with identity poses, each object with the body the daemon would make of it
+/// ([`crate::daemon::make_body`]: seen from `viewpoint`, on the support under it, from its
+/// points fused as the daemon fuses them), through the same [`PhysicsScene`] a subscriber
+/// keeps. With `free`, an object that stands on no support is free rather than static (one
+/// object meshed alone, for the user to place).
 pub fn offline_scene(
-    objects: &[(u64, TriMesh, f32)],
+    objects: &[OfflineObject],
     support_outlines: &[Vec<glam::Vec3>],
+    viewpoint: Option<Vec3>,
     free: bool,
 ) -> PhysicsUpdate {
     use tacmesh_protocol::{
@@ -421,14 +438,30 @@ pub fn offline_scene(
             0.0,
         )));
     }
-    for (id, mesh, residual_m) in objects {
-        let flags = if mesh.is_closed() { SHAPE_CLOSED } else { 0 };
+    for object in objects {
+        let flags = if object.mesh.is_closed() {
+            SHAPE_CLOSED
+        } else {
+            0
+        };
         scene.apply(&Message::Shape(shape(
-            *id,
-            mesh.clone(),
+            object.id,
+            object.mesh.clone(),
             flags,
-            *residual_m,
+            object.residual_m,
         )));
+    }
+    let supports: Vec<WorldSupport> = scene
+        .objects()
+        .filter(|o| o.shape.is_support())
+        .filter_map(world_support)
+        .map(|(s, _)| s)
+        .collect();
+    for object in objects {
+        let Some(body) = offline_body(object, objects, &supports, viewpoint) else {
+            continue;
+        };
+        scene.apply(&Message::Body(body));
     }
     let mut update = PhysicsScene::new().update(&scene);
     if free {
@@ -442,4 +475,53 @@ pub fn offline_scene(
             .retain(|(_, why)| why != "it stands on no support");
     }
     update
+}
+
+/// The body the daemon would make of an object meshed offline (identity pose: its frame is
+/// the cloud's): on the support under it, or on the top of another object it rests on. `None`
+/// when it has none (the scene then makes its collision from the shape, as for an object
+/// whose body has not come yet).
+fn offline_body(
+    object: &OfflineObject,
+    all: &[OfflineObject],
+    supports: &[WorldSupport],
+    viewpoint: Option<Vec3>,
+) -> Option<Body> {
+    let vertices = &object.mesh.vertices;
+    let others: Vec<Vec<Vec3>> = all
+        .iter()
+        .filter(|o| o.id != object.id)
+        .map(|o| o.mesh.vertices.clone())
+        .collect();
+    let support = tacmesh_physics::support_under(supports, vertices).map(|plane| {
+        match tacmesh_physics::resting_top(plane, vertices, &others) {
+            Some(top) => plane.raised(top),
+            None => *plane,
+        }
+        .in_frame(glam::Affine3A::IDENTITY)
+    });
+    let fused = (object.voxel_m > 0.0 && !object.points.is_empty()).then(|| {
+        let mut grid = tacmesh_reconstruct::moment_grid::MomentGrid::new(object.voxel_m);
+        grid.integrate(&object.points);
+        grid.surface_means(crate::daemon::MAX_FUSED_POINTS)
+    });
+    let job = crate::daemon::BodyJob {
+        object_id: object.id,
+        shape_version: 1,
+        mesh_in_object: object.mesh.clone(),
+        viewpoint_in_object: viewpoint,
+        support,
+        margin_m: object.residual_m,
+        fused_roughness_m: fused.as_ref().map_or(0.0, |f| f.roughness_m),
+        fused_points: fused.map(|f| f.points).unwrap_or_default(),
+    };
+    match crate::daemon::make_body(&job, None, |mesh, config| {
+        Ok(tacmesh_physics::split_part_points(mesh, config))
+    }) {
+        Ok(body) => Some(body),
+        Err(why) => {
+            tracing::debug!("object {}: no body: {why}", object.id);
+            None
+        }
+    }
 }

@@ -592,3 +592,73 @@ fn one_view_bodies_complete_the_object_for_mass_and_contact() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+#[test]
+#[ignore]
+fn scratch_mug() {
+    use std::path::Path;
+    use tacmesh::physics::{collision_proxy, revolve, FusedPoints, ProxyConfig};
+    let shell = tacmesh_formats::read_mesh(Path::new("/tmp/mugout/object-1.ply")).unwrap();
+    let plane = tacmesh_formats::read_mesh(Path::new("/tmp/mugout/plane-1.ply")).unwrap();
+    let t = plane.triangles[0];
+    let [a, b, c] = t.map(|i| plane.vertices[i as usize]);
+    let mut n = (b - a).cross(c - a).normalize();
+    let centroid = shell.vertices.iter().copied().sum::<Vec3>() / shell.vertices.len() as f32;
+    if (centroid - a).dot(n) < 0.0 {
+        n = -n;
+    }
+    let support = SupportPlane {
+        normal: n,
+        offset: n.dot(a),
+    };
+    let cloud = tacmesh_formats::read_cloud(Path::new(
+        "testdata/pointclouds/pcl/table_scene_mug_stereo_textured.pcd",
+    ))
+    .unwrap();
+    let (lo, hi) = shell.bounds().unwrap();
+    let pts: Vec<Vec3> = cloud
+        .points
+        .iter()
+        .copied()
+        .filter(|p| {
+            p.cmpge(lo - 0.01).all() && p.cmple(hi + 0.01).all() && support.height(*p) > 0.005
+        })
+        .collect();
+    let mut grid = tacmesh::reconstruct::moment_grid::MomentGrid::new(0.004);
+    grid.integrate(&pts);
+    let fused = grid.surface_means(4096);
+    eprintln!(
+        "{} points, {} fused, roughness {}",
+        pts.len(),
+        fused.points.len(),
+        fused.roughness_m
+    );
+    let proxy = collision_proxy(
+        &shell,
+        Some(Vec3::ZERO),
+        Some(support),
+        &ProxyConfig {
+            margin_m: 0.004,
+            ..ProxyConfig::default()
+        },
+    );
+    let r = revolve(
+        &shell,
+        Some(FusedPoints {
+            points: &fused.points,
+            roughness_m: fused.roughness_m,
+        }),
+        support,
+        0.007,
+    )
+    .unwrap();
+    eprintln!("axis {} {} profile {:?}", r.axis_point, r.axis, r.profile);
+    eprintln!("{:?}", r.lies_within(&proxy.mesh, Some(support), 0.007));
+    tacmesh_formats::write_mesh(Path::new("/tmp/mugout/turned.ply"), &r.mesh).unwrap();
+    tacmesh_formats::write_mesh(Path::new("/tmp/mugout/proxy.ply"), &proxy.mesh).unwrap();
+    let fc = tacmesh::source::PointCloud {
+        points: fused.points.clone(),
+        ..Default::default()
+    };
+    tacmesh_formats::write_cloud(Path::new("/tmp/mugout/fused.ply"), &fc).unwrap();
+}

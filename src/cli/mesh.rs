@@ -4,6 +4,7 @@ use anyhow::Context;
 use clap::Args;
 use tacmesh::formats::{read_cloud_file, CloudFile, NonFinite};
 use tacmesh::glam::Vec3;
+use tacmesh::physics_scene::OfflineObject;
 use tacmesh::pipeline::{mesh_cloud, residual_for_target_mhe_m, Length, MeshConfig};
 use tacmesh::segment::{segment, SegmentConfig};
 
@@ -89,10 +90,11 @@ impl MeshArgs {
 /// their residual bounds) on `supports` (outlines), and says what each object became.
 fn write_physics(
     args: &MeshArgs,
-    objects: &[(u64, tacmesh::TriMesh, f32)],
+    objects: &[OfflineObject],
     supports: &[Vec<Vec3>],
+    viewpoint: Option<Vec3>,
 ) -> anyhow::Result<()> {
-    let update = tacmesh::physics_scene::offline_scene(objects, supports, !args.objects);
+    let update = tacmesh::physics_scene::offline_scene(objects, supports, viewpoint, !args.objects);
     anyhow::ensure!(
         !update.scene.bodies.is_empty(),
         "no body could be made of what was meshed: {}",
@@ -255,7 +257,14 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     );
     tacmesh::formats::write_mesh(&args.output, &mesh).context("writing the mesh")?;
     if args.wants_physics() {
-        write_physics(&args, &[(1, mesh, report.max_residual)], &[])?;
+        let object = OfflineObject {
+            id: 1,
+            mesh,
+            residual_m: report.max_residual,
+            points: cloud.points,
+            voxel_m: report.voxel_size_m,
+        };
+        write_physics(&args, &[object], &[], config.viewpoint)?;
     }
     if args.json {
         super::print_json(&MeshOutput {
@@ -386,14 +395,20 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     let mut meshed = Vec::new();
     for (k, indices) in segmentation.objects.iter().enumerate() {
         let id = k + 1;
-        let points = indices.iter().map(|&i| cloud.points[i as usize]).collect();
-        let object = tacmesh::PointCloud::new(points);
+        let points: Vec<Vec3> = indices.iter().map(|&i| cloud.points[i as usize]).collect();
+        let object = tacmesh::PointCloud::new(points.clone());
         let file = dir.join(format!("object-{id}.ply"));
         match mesh_cloud(&object, &config) {
             Ok((mesh, report)) => {
                 tacmesh::formats::write_mesh(&file, &mesh).context("writing the mesh")?;
                 if args.wants_physics() {
-                    meshed.push((id as u64, mesh, report.max_residual));
+                    meshed.push(OfflineObject {
+                        id: id as u64,
+                        mesh,
+                        residual_m: report.max_residual,
+                        points,
+                        voxel_m: report.voxel_size_m,
+                    });
                 }
                 tracing::info!(
                     points = report.points,
@@ -427,7 +442,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     );
     if args.wants_physics() {
         let outlines: Vec<Vec<Vec3>> = segmentation.planes.iter().map(|p| p.outline()).collect();
-        write_physics(args, &meshed, &outlines)?;
+        write_physics(args, &meshed, &outlines, Some(viewpoint))?;
     }
     let labels_path = dir.join("labels.txt");
     let mut labels = String::with_capacity(segmentation.labels.len() * 2);

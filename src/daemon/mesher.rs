@@ -175,7 +175,7 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
 
 /// The most fused points a body job carries: a primitive's fit is linear in them, and a
 /// few thousand voxels' means pin a primitive's few parameters to a millimetre or two.
-const MAX_FUSED_POINTS: usize = 4096;
+pub const MAX_FUSED_POINTS: usize = 4096;
 
 #[cfg(test)]
 mod tests {

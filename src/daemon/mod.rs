@@ -42,6 +42,7 @@ pub use crate::socket_dir::default_socket_path;
 pub use bodies::{make_body, BodyError, BodyJob};
 pub use config::{ConfigError, DaemonConfig};
 pub use counters::CounterSnapshot;
+pub use mesher::MAX_FUSED_POINTS;
 pub use perception::track_config;
 pub use sensor::{SensorError, SensorSpec};
 
