@@ -652,8 +652,10 @@ pub fn revolve(
     let mut hollow = vec![0.0f32; slices];
     let mut radius = None;
     for k in (0..slices).rev() {
-        // A ring: nothing seen near the axis, and its inner radius well inside its outer.
-        if inner[k].is_finite() && inner[k] > 2.0 * bound_m && outer[k] - inner[k] > 2.0 * bound_m {
+        // A ring: nothing seen near the axis, and its inner radius well inside its outer, or
+        // an inward wall seen there (a torus's crown is a narrow ring, not a disc).
+        let away = inner[k].is_finite() && inner[k] > 2.0 * bound_m;
+        if away && (outer[k] - inner[k] > 2.0 * bound_m || wall_inner[k].1 > 0) {
             radius = Some(inner[k]);
         } else if let Some(r) = radius {
             // A floor lies well inside the hollow: an upward face by its wall is the wall's
