@@ -53,6 +53,12 @@ pub struct MeshArgs {
     /// are oriented by propagation]
     #[arg(long, value_parser = super::parse_vec3, allow_hyphen_values = true)]
     viewpoint: Option<Vec3>,
+    /// With --objects: up, "x,y,z" in the cloud's frame (supports face it; any length)
+    /// [default: -y, up in a camera's optical frame held upright; give 0,0,1 for a cloud in a
+    /// z-up world frame, such as `tacmesh capture` writes]. The sensor then looks from
+    /// --viewpoint towards the cloud's centre
+    #[arg(long, value_parser = super::parse_direction, allow_hyphen_values = true)]
+    up: Option<Vec3>,
     /// Print one JSON object with face counts, the residual reached, the fit's distance to the
     /// data before and after (measuring it after costs one more pass), per-stage milliseconds,
     /// the points left out for a NaN or infinite coordinate and the viewpoint used
@@ -376,12 +382,27 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     // and the convexity split, which separate touching and stacked objects; mean IoU 0.92 on
     // the labelled mOSD scans against 0.65 point by point), except that one scan has time to
     // fit planes on all its points.
+    let live = SegmentConfig::live();
+    // Another frame than the optical one: the sensor looks from the viewpoint towards the
+    // cloud's centre (depth steps grow along it).
+    let (up, forward) = match args.up {
+        Some(up) => {
+            let finite = cloud.points.iter().filter(|p| p.is_finite());
+            let (sum, n) = finite.fold((Vec3::ZERO, 0usize), |(s, n), p| (s + *p, n + 1));
+            let centre = sum / n.max(1) as f32;
+            let forward = (centre - viewpoint).try_normalize().unwrap_or(live.forward);
+            (up, forward)
+        }
+        None => (live.up, live.forward),
+    };
     let segmentation = segment(
         &cloud.points,
         &SegmentConfig {
             viewpoint_m: viewpoint,
             plane_sample_points: usize::MAX,
-            ..SegmentConfig::live()
+            up,
+            forward,
+            ..live
         },
     );
     tracing::info!(
