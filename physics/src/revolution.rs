@@ -275,7 +275,7 @@ fn samples(mesh: &TriMesh) -> Vec<Sample> {
 /// The centre about which the wall points (bin, side: outward 0 or inward 1, where across
 /// the axis) keep one radius per bin and side best: Gauss–Newton on the points' distances
 /// from the centre, each bin and side's own radius eliminated (its mean), from `start`;
-/// points farther than `tolerance_m` from their bin's radius left out after the first step.
+/// points farther than `tolerance_m` from their bin and side's median radius left out.
 /// `start` when the walls do not pin a centre down.
 fn common_centre(
     walls: &[(usize, usize, Vec2)],
@@ -284,19 +284,40 @@ fn common_centre(
     tolerance_m: f32,
 ) -> Vec2 {
     let mut centre = start.as_dvec2();
-    let mut trim = f64::INFINITY;
+    let trim = f64::from(tolerance_m);
     for _ in 0..12 {
-        // Each bin and side's mean radius and mean direction.
-        let mut sums = vec![[(0.0f64, glam::DVec2::ZERO, 0u32); 2]; bins];
         let measured: Vec<(usize, usize, f64, glam::DVec2)> = walls
             .iter()
             .filter_map(|&(bin, side, p)| {
                 let d = p.as_dvec2() - centre;
                 let r = d.length();
-                (r > 1e-9 && bin < bins).then(|| (bin, side, r, d / r))
+                (r > 1e-9 && bin < bins && side < 2).then(|| (bin, side, r, d / r))
             })
             .collect();
-        for &(bin, side, r, dir) in &measured {
+        // Each bin and side's median radius: points farther from it than the tolerance (a
+        // mug's handle beside its wall) are left out from the first step.
+        let mut radii = vec![[Vec::new(), Vec::new()]; bins];
+        for &(bin, side, r, _) in &measured {
+            radii[bin][side].push(r);
+        }
+        let medians: Vec<[Option<f64>; 2]> = radii
+            .iter_mut()
+            .map(|sides| {
+                sides.each_mut().map(|r: &mut Vec<f64>| {
+                    (r.len() >= 3).then(|| {
+                        r.sort_by(f64::total_cmp);
+                        r[r.len() / 2]
+                    })
+                })
+            })
+            .collect();
+        let kept: Vec<&(usize, usize, f64, glam::DVec2)> = measured
+            .iter()
+            .filter(|(bin, side, r, _)| medians[*bin][*side].is_some_and(|m| (r - m).abs() <= trim))
+            .collect();
+        // Each bin and side's mean radius and mean direction, of the points kept.
+        let mut sums = vec![[(0.0f64, glam::DVec2::ZERO, 0u32); 2]; bins];
+        for &&(bin, side, r, dir) in &kept {
             let s = &mut sums[bin][side];
             s.0 += r;
             s.1 += dir;
@@ -304,21 +325,17 @@ fn common_centre(
         }
         // r(c + δ) ≈ r − dir·δ: the step that best evens each group's radii.
         let (mut m, mut rhs, mut used) = (glam::DMat2::ZERO, glam::DVec2::ZERO, 0usize);
-        for &(bin, side, r, dir) in &measured {
+        for &&(bin, side, r, dir) in &kept {
             let (sr, sd, n) = sums[bin][side];
             if n < 3 {
                 continue;
             }
             let e = r - sr / f64::from(n);
-            if e.abs() > trim {
-                continue;
-            }
             let a = dir - sd / f64::from(n);
             m += glam::DMat2::from_cols(a * a.x, a * a.y);
             rhs += a * e;
             used += 1;
         }
-        trim = f64::from(tolerance_m);
         if used < 2 * MIN_SLICE_POINTS || m.determinant().abs() < 1e-12 {
             return start;
         }
