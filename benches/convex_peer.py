@@ -26,7 +26,9 @@ try:
     # Imported by name: coacd ships no type information, so it is typed `Any` on purpose.
     coacd: Any = importlib.import_module("coacd")
 except ModuleNotFoundError as missing:
-    raise SystemExit("convex_peer.py needs coacd: pip install coacd==1.0.14") from missing
+    raise SystemExit(
+        "convex_peer.py needs coacd: pip install coacd==1.0.14"
+    ) from missing
 
 Vertices = npt.NDArray[np.float64]
 Faces = npt.NDArray[np.int32]
@@ -56,7 +58,11 @@ def write_obj(path: pathlib.Path, vertices: Vertices, faces: Faces) -> None:
 
 
 def decompose(
-    vertices: Vertices, faces: Faces, max_hulls: int, max_hull_vertices: int, threshold: float
+    vertices: Vertices,
+    faces: Faces,
+    max_hulls: int,
+    max_hull_vertices: int,
+    threshold: float,
 ) -> list[tuple[Vertices, Faces]]:
     """CoACD with its defaults but for the bounds: at most `max_hulls` hulls, each decimated
     to at most `max_hull_vertices` vertices."""
@@ -68,7 +74,10 @@ def decompose(
         max_ch_vertex=max_hull_vertices,
         seed=1,
     )
-    return [(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int32)) for v, f in parts]
+    return [
+        (np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int32))
+        for v, f in parts
+    ]
 
 
 def main() -> None:
@@ -77,7 +86,9 @@ def main() -> None:
     parser.add_argument("out_dir", type=pathlib.Path)
     parser.add_argument("--max-hulls", type=int, default=8)
     parser.add_argument("--max-hull-vertices", type=int, default=64)
-    parser.add_argument("--threshold", type=float, default=0.05, help="CoACD's concavity bound")
+    parser.add_argument(
+        "--threshold", type=float, default=0.05, help="CoACD's concavity bound"
+    )
     args = parser.parse_args()
     coacd.set_log_level("error")
     args.out_dir.mkdir(parents=True, exist_ok=True)
@@ -85,11 +96,15 @@ def main() -> None:
     for path in sorted(args.mesh_dir.glob("*.obj")):
         vertices, faces = read_obj(path)
         started = time.perf_counter()
-        hulls = decompose(vertices, faces, args.max_hulls, args.max_hull_vertices, args.threshold)
+        hulls = decompose(
+            vertices, faces, args.max_hulls, args.max_hull_vertices, args.threshold
+        )
         seconds = time.perf_counter() - started
         timings[path.stem] = seconds
         for k, (hull_vertices, hull_faces) in enumerate(hulls):
-            write_obj(args.out_dir / f"{path.stem}_hull{k}.obj", hull_vertices, hull_faces)
+            write_obj(
+                args.out_dir / f"{path.stem}_hull{k}.obj", hull_vertices, hull_faces
+            )
         print(
             f"coacd {path.stem:10} faces {len(faces):5} hulls {len(hulls):2} "
             f"max vertices {max(len(v) for v, _ in hulls):3} {seconds * 1e3:8.1f} ms"

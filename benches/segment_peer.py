@@ -28,10 +28,14 @@ SCANS = [
     ("osd_test45", "mixed"),
     ("osd_test57", "cluttered"),
 ]
-ROOT = pathlib.Path(__file__).resolve().parent.parent / "testdata" / "pointclouds" / "mosd"
+ROOT = (
+    pathlib.Path(__file__).resolve().parent.parent / "testdata" / "pointclouds" / "mosd"
+)
 
 
-def best_ious(truth: npt.NDArray[np.int64], predicted: npt.NDArray[np.int64]) -> list[float]:
+def best_ious(
+    truth: npt.NDArray[np.int64], predicted: npt.NDArray[np.int64]
+) -> list[float]:
     """For each labelled object (labels of 20 and up, object = label // 10), the IoU with the
     best-matching predicted segment (1 and up; 0 is no segment)."""
     out = []
@@ -50,9 +54,13 @@ def best_ious(truth: npt.NDArray[np.int64], predicted: npt.NDArray[np.int64]) ->
 
 def segment(points: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    _, inliers = cloud.segment_plane(distance_threshold=0.01, ransac_n=3, num_iterations=1000)
+    _, inliers = cloud.segment_plane(
+        distance_threshold=0.01, ransac_n=3, num_iterations=1000
+    )
     rest = np.setdiff1d(np.arange(len(points)), inliers)
-    labels = np.asarray(cloud.select_by_index(rest).cluster_dbscan(eps=0.015, min_points=10))
+    labels = np.asarray(
+        cloud.select_by_index(rest).cluster_dbscan(eps=0.015, min_points=10)
+    )
     out = np.zeros(len(points), dtype=np.int64)
     for k in set(labels.tolist()) - {-1}:
         members = rest[labels == k]
