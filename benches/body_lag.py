@@ -13,7 +13,6 @@ BENCHMARKS.md. A shape whose body never comes (a newer shape replaced it first) 
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -22,41 +21,20 @@ from pathlib import Path
 
 import numpy as np
 
+from bench_daemon import SPECS, start_daemon
 from tacmesh import FIRST_SUPPORT_ID, Body, BodySolid, Shape, Subscriber
 
-ROOT = Path(__file__).resolve().parents[1]
-TACMESH = Path(os.environ.get("TACMESH_BIN", ROOT / "target/release/tacmesh"))
 SECONDS = 20
-SPECS = {
-    "demo": "sim:demo",
-    "oni": "replay:testdata/recordings/openni1_primesense_12frames_640x480.oni",
-    "bag": "replay:testdata/recordings/realsense_d435_single_depth_color_640x480.bag",
-    "tum": "replay:testdata/depth/tum_fr1?fx=520.9&fy=521.0&cx=325.1&cy=249.7&depth_scale_m=0.0002",
-    "slambook": "replay:testdata/depth/slambook_kinect?fx=518&fy=519&cx=325.5&cy=253.5",
-    "pcl_kinect": "replay:testdata/depth/pcl_kinect_grabber?fx=525&fy=525&cx=320&cy=240",
-    "milk": "replay:testdata/pointclouds/pcl/milk_cartoon_all_small_clorox.pcd",
-}
 
 
 def measure(spec: str) -> str:
     """One Markdown row: the lags and the bodies of `spec` played for SECONDS."""
     with tempfile.TemporaryDirectory() as tmp:
         socket = Path(tmp) / "tacmesh.sock"
-        loop = [] if spec.startswith("sim:") else ["--loop"]
-        daemon = subprocess.Popen(
-            [str(TACMESH), "run", "--sensor", spec, *loop, "--socket", str(socket)]
-            + ["--duration-s", str(SECONDS)],
-            cwd=ROOT,
-            stderr=subprocess.DEVNULL,
-        )
+        daemon = start_daemon(spec, socket, SECONDS)
         shaped: dict[tuple[int, int], float] = {}
         lags: list[float] = []
         try:
-            deadline = time.monotonic() + 60
-            while not socket.exists():
-                if time.monotonic() > deadline or daemon.poll() is not None:
-                    raise RuntimeError(f"the daemon on {spec} did not start")
-                time.sleep(0.05)
             subscriber = Subscriber(socket, reconnect=False, timeout_s=SECONDS + 30)
             for message in subscriber:
                 now = time.monotonic()

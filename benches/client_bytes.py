@@ -13,7 +13,6 @@ table for python/README.md and the load average beside it.
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import tempfile
 import threading
@@ -22,10 +21,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from bench_daemon import SPECS, start_daemon
 from tacmesh import Body, Pose, Shape, Subscriber
-
-ROOT = Path(__file__).resolve().parents[1]
-TACMESH = Path(os.environ.get("TACMESH_BIN", ROOT / "target/release/tacmesh"))
 
 ROWS: list[tuple[str, dict[str, Any]]] = [
     ("the defaults (full encoding, bodies)", {}),
@@ -72,9 +69,8 @@ def read(socket: Path, options: dict[str, Any], seconds: float, out: Reading) ->
             else:
                 out.bytes["other"] += size
         out.seconds = time.monotonic() - started
-    except (
-        Exception
-    ) as err:  # noqa: BLE001 - reported in the table, not raised from a thread
+    # Any failure is reported in the table, not raised from a thread.
+    except Exception as err:  # noqa: BLE001
         out.error = f"{type(err).__name__}: {err}"
 
 
@@ -82,18 +78,8 @@ def main() -> None:
     seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 20.0
     with tempfile.TemporaryDirectory() as tmp:
         socket = Path(tmp) / "tacmesh.sock"
-        daemon = subprocess.Popen(
-            [str(TACMESH), "run", "--sensor", "sim:demo", "--socket", str(socket)]
-            + ["--duration-s", str(seconds)],
-            cwd=ROOT,
-            stderr=subprocess.DEVNULL,
-        )
+        daemon = start_daemon(SPECS["demo"], socket, seconds)
         try:
-            deadline = time.monotonic() + 60
-            while not socket.exists():
-                if time.monotonic() > deadline or daemon.poll() is not None:
-                    raise RuntimeError("the daemon on sim:demo did not start")
-                time.sleep(0.02)
             readings = [Reading() for _ in ROWS]
             threads = [
                 threading.Thread(target=read, args=(socket, options, seconds, out))

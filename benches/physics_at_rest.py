@@ -17,44 +17,23 @@ import re
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-TACMESH = ROOT / "target/release/tacmesh"
+from bench_daemon import SPECS, TACMESH, start_daemon
+
 SECONDS = 20
 SIMULATED_S = 2.0
-SPECS = {
-    "demo": "sim:demo",
-    "oni": "replay:testdata/recordings/openni1_primesense_12frames_640x480.oni",
-    "bag": "replay:testdata/recordings/realsense_d435_single_depth_color_640x480.bag",
-    "tum": "replay:testdata/depth/tum_fr1?fx=520.9&fy=521.0&cx=325.1&cy=249.7&depth_scale_m=0.0002",
-    "slambook": "replay:testdata/depth/slambook_kinect?fx=518&fy=519&cx=325.5&cy=253.5",
-    "pcl_kinect": "replay:testdata/depth/pcl_kinect_grabber?fx=525&fy=525&cx=320&cy=240",
-    "milk": "replay:testdata/pointclouds/pcl/milk_cartoon_all_small_clorox.pcd",
-}
 
 
 def keep_scene(spec: str, out: Path) -> str:
     """Plays `spec` for SECONDS with a subscriber keeping the physics scene in `out`; returns
     what the subscriber logged."""
     socket = out / "tacmesh.sock"
-    loop = [] if spec.startswith("sim:") else ["--loop"]
-    daemon = subprocess.Popen(
-        [str(TACMESH), "run", "--sensor", spec, *loop, "--socket", str(socket)]
-        + ["--duration-s", str(SECONDS)],
-        cwd=ROOT,
-        stderr=subprocess.DEVNULL,
-    )
+    daemon = start_daemon(spec, socket, SECONDS)
     try:
-        deadline = time.monotonic() + 60
-        while not socket.exists():
-            if time.monotonic() > deadline or daemon.poll() is not None:
-                raise RuntimeError(f"the daemon on {spec} did not start")
-            time.sleep(0.05)
         done = subprocess.run(
             [
                 str(TACMESH),

@@ -487,19 +487,14 @@ fn offline_body(
     supports: &[WorldSupport],
     viewpoint: Option<Vec3>,
 ) -> Option<Body> {
-    let vertices = &object.mesh.vertices;
-    let others: Vec<Vec<Vec3>> = all
-        .iter()
-        .filter(|o| o.id != object.id)
-        .map(|o| o.mesh.vertices.clone())
-        .collect();
-    let support = tacmesh_physics::support_under(supports, vertices).map(|plane| {
-        match tacmesh_physics::resting_top(plane, vertices, &others) {
-            Some(top) => plane.raised(top),
-            None => *plane,
-        }
-        .in_frame(glam::Affine3A::IDENTITY)
-    });
+    let others = || {
+        all.iter()
+            .filter(|o| o.id != object.id)
+            .map(|o| o.mesh.vertices.clone())
+            .collect()
+    };
+    let support = tacmesh_physics::standing_on(supports, &object.mesh.vertices, others)
+        .map(|plane| plane.in_frame(glam::Affine3A::IDENTITY));
     let fused = (object.voxel_m > 0.0 && !object.points.is_empty()).then(|| {
         let mut grid = tacmesh_reconstruct::moment_grid::MomentGrid::new(object.voxel_m);
         grid.integrate(&object.points);

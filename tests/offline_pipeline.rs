@@ -627,6 +627,15 @@ fn error_target_mode_reaches_half_table1_faces_on_the_sphere() {
     );
 }
 
+/// The first `mass="…"` of an MJCF text (a body's inertial), kilograms.
+fn first_mass(xml: &str) -> f64 {
+    xml.split(r#"mass=""#)
+        .nth(1)
+        .and_then(|rest| rest.split('"').next())
+        .and_then(|m| m.parse().ok())
+        .expect("an inertial mass")
+}
+
 /// `mesh --mjcf/--sdf/--urdf` writes the body `subscribe` would keep: one closed cloud gives
 /// one free body whose mass is its volume at 500 kg/m³; a real one-view scan with --objects
 /// gives its objects on the table as a finite slab.
@@ -664,12 +673,7 @@ fn mesh_writes_the_physics_body_of_an_offline_cloud() {
         .expect("a closed mesh has a volume");
     let xml = std::fs::read_to_string(scene_dir.join("scene.xml")).expect("scene.xml");
     assert_eq!(xml.matches("<freejoint").count(), 1, "{xml}");
-    let mass: f64 = xml
-        .split(r#"mass=""#)
-        .nth(1)
-        .and_then(|rest| rest.split('"').next())
-        .and_then(|m| m.parse().ok())
-        .expect("an inertial mass");
+    let mass = first_mass(&xml);
     // The body is the mesh's convex parts; its mass the mesh's own volume at 500 kg/m³.
     assert!(
         (mass / (500.0 * volume) - 1.0).abs() < 0.02,
@@ -751,12 +755,7 @@ fn mesh_objects_makes_the_daemons_bodies_of_a_captured_frame() {
         .split(r#"<body name="object-"#)
         .skip(1)
         .map(|body| {
-            let mass = body
-                .split(r#"mass=""#)
-                .nth(1)
-                .and_then(|rest| rest.split('"').next())
-                .and_then(|m| m.parse().ok())
-                .expect("an inertial mass");
+            let mass = first_mass(body);
             let end = body.find("</body>").unwrap_or(body.len());
             (mass, body[..end].to_owned())
         })

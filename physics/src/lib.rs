@@ -39,7 +39,8 @@ pub use scene::{
 pub use sdf::{sdf_document, write_sdf, SdfConfig, SdfDocument};
 pub use split::split_part_points;
 pub use support::{
-    min_area_rectangle, resting_top, rests_on, support_under, WorldSupport, RESTING_GAP_M,
+    min_area_rectangle, resting_top, rests_on, standing_on, support_under, WorldSupport,
+    RESTING_GAP_M,
 };
 pub use tacmesh_source::TriMesh;
 pub use urdf::{urdf_documents, write_urdf, UrdfConfig, UrdfDocuments, WrittenUrdf};

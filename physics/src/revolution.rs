@@ -71,9 +71,7 @@ impl Revolved {
             .collect();
         crate::primitive::within(volume, &surface, container, support, bound_m)
     }
-}
 
-impl Revolved {
     /// The solid's convex parts by its structure, each as the points whose hull it is: the
     /// profile cut into bands at its vertices' heights, neighbouring bands joined while their
     /// union stays convex within `tolerance_m`; a piece that reaches the axis is turned whole

@@ -93,6 +93,22 @@ pub fn support_under<'a>(
 /// still rest on it, metres: the segmentation cuts each off a little short where they meet.
 pub const RESTING_GAP_M: f32 = 0.03;
 
+/// What an object (its vertices in the world) stands on: the support under it
+/// ([`support_under`]), or the top of another object on that support it rests on
+/// ([`resting_top`]: the support raised to that top). `others` gives the other objects'
+/// vertices in the world, asked for only when there is a support.
+pub fn standing_on(
+    supports: &[WorldSupport],
+    object_in_world: &[Vec3],
+    others: impl FnOnce() -> Vec<Vec<Vec3>>,
+) -> Option<WorldSupport> {
+    let plane = support_under(supports, object_in_world)?;
+    Some(match resting_top(plane, object_in_world, &others()) {
+        Some(top) => plane.raised(top),
+        None => *plane,
+    })
+}
+
 /// The top an object (its vertices in the world) rests on when it stands on another object
 /// rather than on `support` itself: the highest top among `others` (each one's vertices in the
 /// world) that is above the support, within [`RESTING_GAP_M`] of the object's lowest point

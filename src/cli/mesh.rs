@@ -416,8 +416,8 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     let mut meshed = Vec::new();
     for (k, indices) in segmentation.objects.iter().enumerate() {
         let id = k + 1;
-        let points: Vec<Vec3> = indices.iter().map(|&i| cloud.points[i as usize]).collect();
-        let object = tacmesh::PointCloud::new(points.clone());
+        let points = indices.iter().map(|&i| cloud.points[i as usize]).collect();
+        let object = tacmesh::PointCloud::new(points);
         let file = dir.join(format!("object-{id}.ply"));
         match mesh_cloud(&object, &config) {
             Ok((mesh, report)) => {
@@ -427,7 +427,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
                         id: id as u64,
                         mesh,
                         residual_m: report.max_residual,
-                        points,
+                        points: object.points,
                         voxel_m: report.voxel_size_m,
                     });
                 }

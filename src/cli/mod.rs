@@ -203,7 +203,6 @@ fn warn_if_implausible_mesh(name: &str, mesh: &TriMesh) {
     }
 }
 
-/// Parses `x,y,z` (a position in metres) for clap; NaN and infinities are refused.
 /// A direction "x,y,z" (any length but zero), as a unit vector.
 pub(crate) fn parse_direction(s: &str) -> Result<tacmesh::glam::Vec3, String> {
     parse_vec3(s)?
@@ -211,6 +210,7 @@ pub(crate) fn parse_direction(s: &str) -> Result<tacmesh::glam::Vec3, String> {
         .ok_or_else(|| "a direction cannot be 0,0,0".to_owned())
 }
 
+/// Parses `x,y,z` (a position in metres) for clap; NaN and infinities are refused.
 pub(crate) fn parse_vec3(s: &str) -> Result<tacmesh::glam::Vec3, String> {
     let parts: Vec<f32> = s
         .split(',')

@@ -150,14 +150,10 @@ fn mesh_one(shared: &Shared, job: MeshJob) {
         let supports = board.supports();
         // What it stands on: a support plane, or the top of another object on it (then the
         // plane through that top: the body rests there, not on the table under both).
-        let support = tacmesh_physics::support_under(&supports, &in_world).map(|plane| {
-            let others = board.other_objects_in_world(job.object_id);
-            match tacmesh_physics::resting_top(plane, &in_world, &others) {
-                Some(top) => plane.raised(top),
-                None => *plane,
-            }
-            .in_frame(published.world_from_object)
-        });
+        let support = tacmesh_physics::standing_on(&supports, &in_world, || {
+            board.other_objects_in_world(job.object_id)
+        })
+        .map(|plane| plane.in_frame(published.world_from_object));
         drop(board);
         let fused = job.grid.surface_means(MAX_FUSED_POINTS);
         shared.body_queue.submit(BodyJob {
