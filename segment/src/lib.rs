@@ -42,6 +42,7 @@ mod clusters;
 mod convexity;
 mod creases;
 pub mod grid;
+pub mod labelled;
 mod links;
 mod organised;
 mod planes;
@@ -55,7 +56,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 use tacmesh_source::PointCloud;
 
-pub use organised::{segment_organised, segment_organised_timed, OrganisedSegmentation};
+pub use organised::{
+    segment_organised, segment_organised_timed, segment_scan, OrganisedSegmentation,
+};
 pub use planes::SupportPlane;
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)

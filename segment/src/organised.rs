@@ -31,6 +31,28 @@ pub struct OrganisedSegmentation {
     pub objects: Vec<Vec<u32>>,
 }
 
+/// A scan or a frame as the daemon segments it, and `tacmesh mesh --objects` too, so that a
+/// scan offline and the same scan replayed live give the same objects: an organised cloud
+/// (`grid`, width × height) on every `stride`-th pixel by [`segment_organised`], any other
+/// cloud point by point by [`segment_with_hints`](crate::segment_with_hints). The objects are
+/// in full resolution either way.
+pub fn segment_scan(
+    points: &[Vec3],
+    grid: Option<(u32, u32)>,
+    stride: u32,
+    config: &SegmentConfig,
+    hints: &[SupportPlane],
+) -> OrganisedSegmentation {
+    match grid {
+        Some((width, height)) => segment_organised(points, width, height, stride, config, hints),
+        None => {
+            let strided = crate::segment_with_hints(points, config, hints);
+            let objects = strided.objects.clone();
+            OrganisedSegmentation { strided, objects }
+        }
+    }
+}
+
 /// Segments every `stride`-th pixel (in each direction) of the organised cloud `points`
 /// (`width × height`, row-major) with `config`, whose cluster sizes count full-resolution
 /// points (they are divided by `stride²` for the strided cloud), starting from the plane

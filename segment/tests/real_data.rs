@@ -15,7 +15,8 @@ use std::time::Instant;
 use glam::Vec3;
 use rustc_hash::FxHashMap;
 use tacmesh_formats::pcd::read_pcd;
-use tacmesh_segment::{segment, segment_organised, SegmentConfig, Segmentation};
+use tacmesh_segment::labelled::{score, ScanScore};
+use tacmesh_segment::{segment, segment_organised, segment_scan, SegmentConfig, Segmentation};
 
 const MOSD_TEST0: &str = "pointclouds/mosd/osd_test0.pcd";
 const MOSD_TEST35: &str = "pointclouds/mosd/osd_test35.pcd";
@@ -146,25 +147,12 @@ const MOSD_SCANS: [(&str, &str); 8] = [
     ("osd_test57", "cluttered"),
 ];
 
-/// How one segmentation of one labelled scan scores.
-#[derive(Debug)]
-struct ScanScore {
-    /// Best-match IoU of each labelled object.
-    ious: Vec<(u32, f64)>,
-    /// Predicted objects.
-    predicted: usize,
-    /// Labelled objects that share their best-matching segment with another labelled object
-    /// (each has at least half its points in a segment holding half of another's).
-    merged: usize,
-}
-
-/// The ways the eight scans are segmented: the crate's point-wise defaults, `tacmesh mesh
-/// --objects` (the live settings with planes fitted on every point), and the daemon (the live
-/// settings on every 2nd pixel, each pixel then labelled from its strided neighbour).
+/// The ways the eight scans are segmented: the crate's point-wise defaults, and the daemon's
+/// (the live settings on every 2nd pixel, each pixel then labelled from its strided neighbour),
+/// which `tacmesh mesh --objects` makes too ([`segment_scan`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Setting {
     PointWise,
-    MeshObjects,
     Daemon,
 }
 
@@ -172,7 +160,6 @@ impl Setting {
     fn name(self) -> &'static str {
         match self {
             Setting::PointWise => "point-wise",
-            Setting::MeshObjects => "mesh --objects",
             Setting::Daemon => "daemon",
         }
     }
@@ -182,15 +169,15 @@ impl Setting {
     fn labels(self, points: &[Vec3], width: u32, height: u32) -> (Vec<u32>, usize) {
         let objects = match self {
             Setting::PointWise => segment(points, &SegmentConfig::default()).objects,
-            Setting::MeshObjects => {
-                let config = SegmentConfig {
-                    plane_sample_points: usize::MAX,
-                    ..SegmentConfig::live()
-                };
-                segment(points, &config).objects
-            }
             Setting::Daemon => {
-                segment_organised(points, width, height, 2, &SegmentConfig::live(), &[]).objects
+                segment_scan(
+                    points,
+                    Some((width, height)),
+                    2,
+                    &SegmentConfig::live(),
+                    &[],
+                )
+                .objects
             }
         };
         let mut labels = vec![0u32; points.len()];
@@ -207,104 +194,52 @@ fn score_scan(name: &str, setting: Setting) -> ScanScore {
     let file = tacmesh_testdata::path(&format!("pointclouds/mosd/{name}.pcd"));
     let cloud = read_pcd(&file).unwrap_or_else(|e| panic!("reading {name}: {e}"));
     let truth = cloud.labels.expect("mOSD scans carry a label field");
-    let (predicted_labels, predicted) = setting.labels(&cloud.points, cloud.width, cloud.height);
-    let mut sizes: FxHashMap<u32, usize> = FxHashMap::default();
-    let mut predicted_sizes: FxHashMap<u32, usize> = FxHashMap::default();
-    let mut overlaps: FxHashMap<(u32, u32), usize> = FxHashMap::default();
-    for (&t, &p) in truth.iter().zip(&predicted_labels) {
-        if p > 0 {
-            *predicted_sizes.entry(p).or_default() += 1;
-        }
-        if t >= 20 {
-            *sizes.entry(t / 10).or_default() += 1;
-            if p > 0 {
-                *overlaps.entry((t / 10, p)).or_default() += 1;
-            }
-        }
-    }
-    let mut ids: Vec<u32> = sizes.keys().copied().collect();
-    ids.sort_unstable();
-    let ious = ids
-        .into_iter()
-        .map(|id| {
-            let best = (1..=predicted as u32)
-                .map(|p| {
-                    let inter = overlaps.get(&(id, p)).copied().unwrap_or(0);
-                    let union = sizes[&id] + predicted_sizes.get(&p).copied().unwrap_or(0) - inter;
-                    inter as f64 / union.max(1) as f64
-                })
-                .fold(0.0, f64::max);
-            (id, best)
-        })
-        .collect();
-    // Segments that hold the majority of a labelled object, and how many objects each holds.
-    let mut holders: FxHashMap<u32, usize> = FxHashMap::default();
-    let mut held_by: Vec<u32> = Vec::new();
-    for (&(object, segment), &n) in &overlaps {
-        if 2 * n >= sizes[&object] {
-            *holders.entry(segment).or_default() += 1;
-            held_by.push(segment);
-        }
-    }
-    let merged = held_by.iter().filter(|s| holders[s] > 1).count();
-    ScanScore {
-        ious,
-        predicted,
-        merged,
-    }
+    let (predicted, _) = setting.labels(&cloud.points, cloud.width, cloud.height);
+    score(&truth, &predicted)
 }
 
-/// Per-object IoU on the eight labelled scans, for the point-wise defaults, `mesh --objects`
-/// and the daemon, by scene kind, each held to a floor a little under what it scores now
-/// (2026-12-02), so that a change that loses an object or merges two fails here. Prints the
+/// Per-object IoU on the eight labelled scans, for the point-wise defaults and the daemon
+/// (and `mesh --objects`, the same call), each scan held to a floor a little under what it
+/// scores now, so that a change that loses an object or merges two fails here. Prints the
 /// table that BENCHMARKS.md quotes
-/// (`cargo test -p tacmesh-segment --release --test real_data -- --nocapture iou_on`).
-///
-/// Scores now (mean IoU per scan, point-wise / mesh --objects / daemon): boxes 0.94 / 0.97 /
-/// 0.96, cylinders stacked 0.92 / 0.95 / 0.92, stacked 0.33 / 0.97 / 0.96 and 0.48 / 0.96 /
-/// 0.95, occluded 0.44 / 0.77 / 0.77, cylinders 0.95 / 0.97 / 0.96, mixed 0.54 / 0.91 / 0.89,
-/// cluttered 0.64 / 0.91 / 0.87; over all 39 objects 0.65 / 0.92 / 0.90. Before the convexity
-/// split the live settings scored 0.84 (stacked 0.65, mixed 0.81, cluttered 0.82). The
-/// occluded scene's flat box, cut in two by the box leaning over it, is still two objects.
+/// (`cargo test -p tacmesh-segment --release --test real_data -- --nocapture iou_on`; the
+/// learning set's table is the `labelled_iou` example's).
 #[test]
 fn iou_on_the_eight_labelled_scans() {
-    // (scan, point-wise floor, mesh --objects floor, daemon floor) for the mean IoU of the
-    // scan's objects.
-    const FLOORS: [(&str, f64, f64, f64); 8] = [
-        ("osd_test0", 0.90, 0.94, 0.93),
-        ("osd_test35", 0.88, 0.92, 0.90),
-        ("osd_test17", 0.30, 0.94, 0.93),
-        ("osd_test20", 0.45, 0.93, 0.92),
-        ("osd_test26", 0.40, 0.74, 0.74),
-        ("osd_test38", 0.90, 0.94, 0.93),
-        ("osd_test45", 0.50, 0.89, 0.87),
-        ("osd_test57", 0.60, 0.89, 0.85),
+    // (scan, point-wise floor, daemon floor) for the mean IoU of the scan's objects.
+    const FLOORS: [(&str, f64, f64); 8] = [
+        ("osd_test0", 0.90, 0.93),
+        ("osd_test35", 0.88, 0.90),
+        ("osd_test17", 0.30, 0.93),
+        ("osd_test20", 0.45, 0.92),
+        ("osd_test26", 0.40, 0.74),
+        ("osd_test38", 0.90, 0.93),
+        ("osd_test45", 0.50, 0.87),
+        ("osd_test57", 0.60, 0.85),
     ];
     let mut failures = Vec::new();
-    for setting in [Setting::PointWise, Setting::MeshObjects, Setting::Daemon] {
+    for setting in [Setting::PointWise, Setting::Daemon] {
         let mut all = Vec::new();
-        for ((name, kind), (floor_name, point_wise, mesh_objects, daemon)) in
-            MOSD_SCANS.iter().zip(FLOORS)
-        {
+        for ((name, kind), (floor_name, point_wise, daemon)) in MOSD_SCANS.iter().zip(FLOORS) {
             assert_eq!(*name, floor_name);
             let score = score_scan(name, setting);
-            let mean = score.ious.iter().map(|(_, v)| v).sum::<f64>() / score.ious.len() as f64;
+            let mean = score.mean_iou();
             eprintln!(
-                "{:14} {name:10} {kind:18} objects {:2} predicted {:2} merged {:2} \
+                "{:10} {name:10} {kind:18} objects {:2} segments {:2} split {} merged {} \
                  mean IoU {mean:.3} per object {:?}",
                 setting.name(),
-                score.ious.len(),
-                score.predicted,
-                score.merged,
+                score.objects.len(),
+                score.segments,
+                score.objects.iter().filter(|o| o.pieces > 1).count(),
+                score.objects.iter().filter(|o| o.merged).count(),
                 score
-                    .ious
+                    .objects
                     .iter()
-                    .map(|(_, v)| (v * 100.0).round() / 100.0)
+                    .map(|o| (o.iou * 100.0).round() / 100.0)
                     .collect::<Vec<_>>()
             );
             let floor = match setting {
                 Setting::PointWise => point_wise,
-                Setting::MeshObjects => mesh_objects,
                 Setting::Daemon => daemon,
             };
             if mean < floor {
@@ -313,7 +248,7 @@ fn iou_on_the_eight_labelled_scans() {
                     setting.name()
                 ));
             }
-            all.extend(score.ious.iter().map(|(_, v)| *v));
+            all.extend(score.objects.iter().map(|o| o.iou));
         }
         let mean = all.iter().sum::<f64>() / all.len() as f64;
         eprintln!(

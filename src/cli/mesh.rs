@@ -6,7 +6,7 @@ use tacmesh::formats::{read_cloud_file, CloudFile, NonFinite};
 use tacmesh::glam::Vec3;
 use tacmesh::physics_scene::OfflineObject;
 use tacmesh::pipeline::{mesh_cloud, residual_for_target_mhe_m, Length, MeshConfig};
-use tacmesh::segment::{segment, SegmentConfig};
+use tacmesh::segment::{segment_scan, SegmentConfig};
 
 /// Mesh one point cloud (PLY, PCD, or XYZ text: .xyz, .txt, .pts) into one simplified mesh (PLY
 /// or OBJ).
@@ -378,10 +378,9 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
         .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     // Scans are in the sensor frame unless a viewpoint says otherwise.
     let viewpoint = viewpoint.unwrap_or(Vec3::ZERO);
-    // The daemon's segmentation (one algorithm live and offline: 8 mm cells, the crease test
-    // and the convexity split, which separate touching and stacked objects; mean IoU 0.92 on
-    // the labelled mOSD scans against 0.65 point by point), except that one scan has time to
-    // fit planes on all its points.
+    // The daemon's segmentation, call for call: its settings, on every `segment_stride`-th
+    // pixel of an organised scan as the daemon segments each frame, so that a scan meshed here
+    // and the same scan replayed live give the same objects.
     let live = SegmentConfig::live();
     // Another frame than the optical one: the sensor looks from the viewpoint towards the
     // cloud's centre (depth steps grow along it).
@@ -395,26 +394,32 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
         }
         None => (live.up, live.forward),
     };
-    let segmentation = segment(
+    let pipeline = tacmesh::daemon::config::PipelineSection::default();
+    let workspace = tacmesh::daemon::config::WorkspaceSection::default();
+    let scan = segment_scan(
         &cloud.points,
+        file.grid.map(|grid| (grid.width, grid.height)),
+        pipeline.segment_stride,
         &SegmentConfig {
             viewpoint_m: viewpoint,
-            plane_sample_points: usize::MAX,
             up,
             forward,
+            max_object_size_m: workspace.max_object_size_m,
             ..live
         },
+        &[],
     );
+    let (planes, objects) = (scan.strided.planes, scan.objects);
     tracing::info!(
-        planes = segmentation.planes.len(),
-        objects = segmentation.objects.len(),
+        planes = planes.len(),
+        objects = objects.len(),
         "segmented {}",
         args.cloud.display()
     );
     let config = mesh_config(args, Some(viewpoint));
     let mut reports = Vec::new();
     let mut meshed = Vec::new();
-    for (k, indices) in segmentation.objects.iter().enumerate() {
+    for (k, indices) in objects.iter().enumerate() {
         let id = k + 1;
         let points = indices.iter().map(|&i| cloud.points[i as usize]).collect();
         let object = tacmesh::PointCloud::new(points);
@@ -450,24 +455,27 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     }
     // Nothing found is said, and is a failure: the caller asked for objects.
     anyhow::ensure!(
-        !segmentation.objects.is_empty(),
+        !objects.is_empty(),
         "{}: no object found: no cluster of points was left once the {} support plane{} and \
          the background were taken out (is the cloud in metres, seen from --viewpoint?)",
         args.cloud.display(),
-        segmentation.planes.len(),
-        if segmentation.planes.len() == 1 {
-            ""
-        } else {
-            "s"
-        }
+        planes.len(),
+        if planes.len() == 1 { "" } else { "s" }
     );
     if args.wants_physics() {
-        let outlines: Vec<Vec<Vec3>> = segmentation.planes.iter().map(|p| p.outline()).collect();
+        let outlines: Vec<Vec<Vec3>> = planes.iter().map(|p| p.outline()).collect();
         write_physics(args, &meshed, &outlines, Some(viewpoint))?;
     }
     let labels_path = dir.join("labels.txt");
-    let mut labels = String::with_capacity(segmentation.labels.len() * 2);
-    for label in &segmentation.labels {
+    // One label per point of the file: `k` for the points of object-k, 0 for the rest.
+    let mut label_of = vec![0u32; cloud.points.len()];
+    for (k, object) in objects.iter().enumerate() {
+        for &i in object {
+            label_of[i as usize] = k as u32 + 1;
+        }
+    }
+    let mut labels = String::with_capacity(label_of.len() * 2);
+    for label in &label_of {
         labels.push_str(&label.to_string());
         labels.push('\n');
     }
@@ -476,7 +484,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     if args.json {
         super::print_json(&serde_json::json!({
             "non_finite_points": file.non_finite,
-            "planes": segmentation.planes.len(),
+            "planes": planes.len(),
             "objects": reports,
         }))?;
     }

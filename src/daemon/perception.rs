@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use tacmesh_segment::{segment_organised, segment_with_hints, SegmentConfig, SupportPlane};
+use tacmesh_segment::{segment_scan, SegmentConfig, SupportPlane};
 use tacmesh_source::{FrameError, Observation};
 use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
 
@@ -304,34 +304,20 @@ impl Segmenting {
             max_object_size_m: workspace.max_object_size_m,
             ..self.segment.clone().seen_from(world_from_sensor)
         };
-        let clusters = match organised {
-            Some((width, height)) => {
-                let organised = segment_organised(
-                    segment_points,
-                    width,
-                    height,
-                    stride,
-                    &config,
-                    &self.plane_hints,
-                );
-                let clusters: Vec<Vec<Vec3>> = organised
-                    .objects
-                    .iter()
-                    .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
-                    .collect();
-                (organised.strided, clusters)
-            }
-            None => {
-                let segmentation = segment_with_hints(segment_points, &config, &self.plane_hints);
-                let clusters: Vec<Vec<Vec3>> = segmentation
-                    .objects
-                    .iter()
-                    .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
-                    .collect();
-                (segmentation, clusters)
-            }
-        };
-        let (segmentation, clusters) = clusters;
+        // `tacmesh mesh --objects` makes this same call on a scan.
+        let scan = segment_scan(
+            segment_points,
+            organised,
+            stride,
+            &config,
+            &self.plane_hints,
+        );
+        let clusters: Vec<Vec<Vec3>> = scan
+            .objects
+            .iter()
+            .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
+            .collect();
+        let segmentation = scan.strided;
         counters.record(Stage::Segment, started.elapsed());
         tracing::debug!(
             supports = segmentation.planes.len(),
