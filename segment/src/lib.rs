@@ -12,6 +12,8 @@
 //! - [`segment_organised`]: an organised cloud (a depth image) segmented on every 2nd or
 //!   `stride`-th pixel, each pixel then labelled from its strided neighbour: the daemon's path
 //!   ([`segment_organised_timed`] with the stage times).
+//! - [`segment_scan`]: what the daemon and `tacmesh mesh --objects` call on a frame or a scan:
+//!   [`segment_organised`] on an organised cloud, [`segment_with_hints`] on any other.
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
 //!   --objects`'.
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
@@ -37,6 +39,11 @@
 //!    strips of floor) dropped.
 //! 7. `convexity.rs`, on the cells (stage 3 on): each cluster split where its surface folds
 //!    concavely into touching or stacked objects (LCCP on surface patches).
+//! 8. `occlusion.rs`, on an organised cloud only (the image tells what is in front of what):
+//!    pieces of one object that an occluder or the object's own near wall cut apart are
+//!    joined, and a container's inner bottom is taken back from the support.
+//!
+//! [`labelled`] scores a segmentation against a scan's per-point labels (mOSD's scheme).
 
 mod clusters;
 mod convexity;
@@ -44,6 +51,7 @@ mod creases;
 pub mod grid;
 pub mod labelled;
 mod links;
+mod occlusion;
 mod organised;
 mod planes;
 mod range;
@@ -279,8 +287,8 @@ pub struct StageTimes {
     pub clusters: Duration,
     /// Clusters split at their concave creases (zero if off).
     pub convexity: Duration,
-    /// Picking the strided pixels of an organised cloud and labelling every pixel from its
-    /// strided neighbour ([`segment_organised_timed`]; zero otherwise).
+    /// Picking the strided pixels of an organised cloud, joining hidden pieces and labelling
+    /// every pixel from its strided neighbour ([`segment_organised_timed`]; zero otherwise).
     pub organised: Duration,
 }
 

@@ -1,6 +1,8 @@
 //! Segmenting an organised cloud (a deprojected depth image: one point per pixel, non-finite
 //! where a pixel has no reading) on every `stride`-th pixel in each direction, as the daemon
-//! does at 30 frames a second, then labelling every pixel from its strided neighbour.
+//! does at 30 frames a second, joining the pieces of objects that something in front cut
+//! apart (`occlusion.rs`, which needs the image), then labelling every pixel from its strided
+//! neighbour.
 //!
 //! At stride 2 a 640×480 frame is segmented on a quarter of its points; neighbouring pixels
 //! of one surface are millimetres apart, so the segmentation hardly changes (mean IoU on the
@@ -109,8 +111,19 @@ pub fn segment_organised_timed(
         }
     }
     let gathered = clock.elapsed();
-    let (strided, mut times) = segment_timed(&sub, &config, hints);
+    let (mut strided, mut times) = segment_timed(&sub, &config, hints);
     times.organised = gathered;
+    let clock = Instant::now();
+    let filled = crate::occlusion::join_hidden_pieces(
+        &sub,
+        sub_width,
+        &mut strided.objects,
+        &mut strided.labels,
+        &crate::plane_band(&config),
+        &config,
+        &strided.planes,
+    );
+    times.organised += clock.elapsed();
     if stride == 1 {
         let objects = strided.objects.clone();
         return (OrganisedSegmentation { strided, objects }, times);
@@ -123,9 +136,10 @@ pub fn segment_organised_timed(
         // The strided pixels of this row's blocks; the pixels of an unlabelled block are not
         // looked at.
         let blocks = (v / stride) * sub_width..(v / stride + 1) * sub_width;
-        for (block, (&label, &anchor)) in strided.labels[blocks.clone()]
+        for (block, ((&label, &anchor), &inner_bottom)) in strided.labels[blocks.clone()]
             .iter()
-            .zip(&sub[blocks])
+            .zip(&sub[blocks.clone()])
+            .zip(&filled[blocks])
             .enumerate()
         {
             if label == 0 {
@@ -140,13 +154,16 @@ pub fn segment_organised_timed(
                 let band_m = band.at(p);
                 // On a support: within its band, or its margin above it. Below a support is
                 // not on it: a chair under a table is an object (the lowest support's underside
-                // was never an object to begin with).
-                let on_plane = strided.planes.iter().any(|plane| {
-                    (-band_m..=band_m + config.plane_margin_m).contains(&plane.signed_distance_m(p))
-                }) || strided
-                    .background
-                    .iter()
-                    .any(|plane| plane.signed_distance_m(p).abs() <= band_m);
+                // was never an object to begin with). An object's inner bottom, which its walls
+                // enclose, is not the support.
+                let on_plane = !inner_bottom
+                    && (strided.planes.iter().any(|plane| {
+                        (-band_m..=band_m + config.plane_margin_m)
+                            .contains(&plane.signed_distance_m(p))
+                    }) || strided
+                        .background
+                        .iter()
+                        .any(|plane| plane.signed_distance_m(p).abs() <= band_m));
                 if !on_plane {
                     objects[label as usize - 1].push(i as u32);
                 }
