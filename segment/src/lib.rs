@@ -378,7 +378,20 @@ pub fn segment_timed(
     times.planes = clock.elapsed();
 
     let clock = Instant::now();
-    let candidates = classify(points, &finite, &mut planes, &mut background, config);
+    let mut candidates = classify(points, &finite, &mut planes, &mut background, config);
+    // A raised support with sides down to the one below is the top of an object (a flat box
+    // on the table): its points are the object's, and the plane a hint for the next frame.
+    let tops = scene::object_tops(points, &candidates, &planes, &band, config);
+    if !tops.is_empty() {
+        for k in tops.into_iter().rev() {
+            let top = planes.remove(k);
+            object_faces.push(SupportPlane {
+                inliers: Vec::new(),
+                ..top
+            });
+        }
+        candidates = classify(points, &finite, &mut planes, &mut background, config);
+    }
     times.classify = clock.elapsed();
 
     let background_of = |object: &[u32]| {

@@ -8,7 +8,9 @@
 //!   [`SegmentConfig::max_support_tilt_deg`] of [`SegmentConfig::up`], and it is at least
 //!   [`SegmentConfig::min_support_size_m`] across and covers half the square of that. Objects rest on it. A smaller plane facing up
 //!   (a book, a box's lid) is part of an object: a small plane raised above the table is not a
-//!   table.
+//!   table. Nor is a large one with sides down to the support below it (a flat box as large
+//!   as a small table; [`object_tops`], after the points are classified): its points go back
+//!   to the objects.
 //! - A **background** plane faces sideways or down (a wall, a ceiling, a cupboard's front) and
 //!   is larger than any object: [`SegmentConfig::max_object_size_m`] across, covering half the
 //!   square of that. Its points are dropped.
@@ -239,6 +241,136 @@ fn flat_and_facing_up(
         .filter(|&&i| (normal.dot(points[i as usize]) - offset).abs() <= limit)
         .count();
     near as f32 >= 0.9 * indices.len() as f32
+}
+
+/// A support this far at least above the lowest one can be an object's top, in metres.
+const MIN_TOP_HEIGHT_M: f32 = 0.03;
+
+/// Points this close to a raised support's outline (across it, on the lowest support's
+/// plane), in metres, are its sides.
+const SIDE_REACH_M: f32 = 0.03;
+
+/// The outline's perimeter is judged in bins this long, in metres.
+const SIDE_BIN_M: f32 = 0.04;
+
+/// A top has sides along at least this much of its outline without a gap, in metres: a box's
+/// face, where a table has legs, a few centimetres each at its corners.
+const MIN_SIDE_RUN_M: f32 = 0.15;
+
+/// The raised supports among `planes` that are the tops of objects, by index: bounded (no
+/// larger than [`SegmentConfig::max_object_size_m`]), raised above the lowest support by
+/// [`MIN_TOP_HEIGHT_M`] or more, and with sides down to it: along [`MIN_SIDE_RUN_M`] of the
+/// top's outline, the `candidates` (points on no plane) within [`SIDE_REACH_M`] of it fill
+/// every quarter of the height between the two planes. A table's top has an apron under its
+/// edge (the top quarter only) and legs at its corners; a flat box's top has its faces.
+pub(crate) fn object_tops(
+    points: &[Vec3],
+    candidates: &[u32],
+    planes: &[SupportPlane],
+    band: &RangeDistance,
+    config: &SegmentConfig,
+) -> Vec<usize> {
+    if planes.len() < 2 {
+        return Vec::new();
+    }
+    // The lowest support is the one the sensor is highest above (as `classify` takes it).
+    let Some(lowest) = (0..planes.len()).max_by(|&a, &b| {
+        let height = |k: usize| planes[k].signed_distance_m(config.viewpoint_m);
+        height(a).total_cmp(&height(b))
+    }) else {
+        return Vec::new();
+    };
+    let floor = &planes[lowest];
+    let (e1, e2) = floor.normal.any_orthonormal_pair();
+    let flat = |p: Vec3| glam::Vec2::new(p.dot(e1), p.dot(e2));
+    let mut tops = Vec::new();
+    for (k, top) in planes.iter().enumerate() {
+        if k == lowest || top.extent_m() > config.max_object_size_m {
+            continue;
+        }
+        // The top's height above the lowest support: the median over its points.
+        let step = top.inliers.len().div_ceil(2000).max(1);
+        let mut heights: Vec<f32> = top
+            .inliers
+            .iter()
+            .step_by(step)
+            .map(|&i| floor.signed_distance_m(points[i as usize]))
+            .collect();
+        if heights.is_empty() {
+            continue;
+        }
+        let middle = heights.len() / 2;
+        let height = *heights.select_nth_unstable_by(middle, f32::total_cmp).1;
+        if height < MIN_TOP_HEIGHT_M {
+            continue;
+        }
+        let corners: Vec<glam::Vec2> = top.outline.iter().map(|&p| flat(p)).collect();
+        if corners.len() < 3 {
+            continue;
+        }
+        let lengths: Vec<f32> = (0..corners.len())
+            .map(|c| corners[c].distance(corners[(c + 1) % corners.len()]))
+            .collect();
+        let perimeter: f32 = lengths.iter().sum();
+        let bins = (perimeter / SIDE_BIN_M).ceil().max(1.0) as usize;
+        let (lo, hi) = corners.iter().fold(
+            (
+                glam::Vec2::splat(f32::INFINITY),
+                glam::Vec2::splat(f32::NEG_INFINITY),
+            ),
+            |(lo, hi), &c| (lo.min(c), hi.max(c)),
+        );
+        let (lo, hi) = (lo - SIDE_REACH_M, hi + SIDE_REACH_M);
+        // Per bin of the perimeter, the quarters of the height its side points fill.
+        let mut filled = vec![0u8; bins];
+        for &i in candidates {
+            let p = points[i as usize];
+            let h = floor.signed_distance_m(p);
+            let band_m = band.at(p);
+            if h <= band_m || h >= height - band_m {
+                continue;
+            }
+            let q = flat(p);
+            if q.cmplt(lo).any() || q.cmpgt(hi).any() {
+                continue;
+            }
+            // The nearest point of the outline, and how far along the perimeter it is.
+            let mut nearest = (f32::INFINITY, 0.0f32);
+            let mut along = 0.0;
+            for c in 0..corners.len() {
+                let (a, b) = (corners[c], corners[(c + 1) % corners.len()]);
+                let ab = b - a;
+                let t = ((q - a).dot(ab) / ab.length_squared().max(1e-12)).clamp(0.0, 1.0);
+                let d = q.distance(a + t * ab);
+                if d < nearest.0 {
+                    nearest = (d, along + t * lengths[c]);
+                }
+                along += lengths[c];
+            }
+            if nearest.0 > SIDE_REACH_M {
+                continue;
+            }
+            let bin = ((nearest.1 / perimeter * bins as f32) as usize).min(bins - 1);
+            let quarter = ((4.0 * h / height) as usize).min(3);
+            filled[bin] |= 1 << quarter;
+        }
+        // The longest run of bins with all four quarters, around the outline.
+        let sided: Vec<bool> = filled.iter().map(|&f| f == 0b1111).collect();
+        let mut longest = 0;
+        let mut run = 0;
+        for k in 0..2 * bins {
+            if sided[k % bins] {
+                run += 1;
+                longest = longest.max(run.min(bins));
+            } else {
+                run = 0;
+            }
+        }
+        if longest as f32 * perimeter / bins as f32 >= MIN_SIDE_RUN_M {
+            tops.push(k);
+        }
+    }
+    tops
 }
 
 #[cfg(test)]

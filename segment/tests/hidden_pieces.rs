@@ -1,7 +1,8 @@
 //! Pieces of one object that something in front of it cuts apart are joined (issue 41): a box
 //! seen on both sides of a post in front of it, and a pot whose near wall hides what joins it
 //! to its inner far wall and bottom. And what must stay apart does: two boxes in a row with the
-//! table seen between them, a can standing on a tin. Simulated depth frames (the daemon's
+//! table seen between them, a can standing on a tin. Supports are tables, not the tops of
+//! objects: a large flat box is an object, a table on legs a support. Simulated depth frames (the daemon's
 //! path: every 2nd pixel, the daemon's settings) with the renderer's object ids as the truth.
 
 use std::time::Duration;
@@ -260,4 +261,81 @@ fn a_can_on_a_tin_is_not_the_tins_inside() {
         assert!(pieces == 1 && iou >= 0.85, "object {id}: IoU {iou:.3}");
     }
     assert_eq!(seen.score.segments, 2);
+}
+
+/// Supports are tables and floors, not the tops of objects (issue 41): a flat box 56 × 44 cm
+/// is as large as a small table, but its top has sides down to the table.
+#[test]
+fn a_large_flat_box_is_an_object_not_a_support() {
+    let seen = see(
+        vec![
+            table(),
+            standing_box(1, Vec3::new(0.56, 0.44, 0.10), 0.0, 0.0),
+            SceneObject {
+                id: 2,
+                mesh: cube(0.1),
+                world_from_object: Affine3A::from_translation(Vec3::new(0.05, 0.0, 0.15)),
+            },
+        ],
+        Vec3::new(0.0, -1.0, 0.9),
+        Vec3::new(0.0, 0.0, 0.05),
+    );
+    for id in [1, 2] {
+        let (iou, pieces) = object(&seen, id);
+        assert!(pieces == 1 && iou >= 0.85, "object {id}: IoU {iou:.3}");
+    }
+    assert_eq!(seen.score.segments, 2);
+}
+
+/// … and a table on a floor stays a support: its legs reach the floor at its corners, its
+/// apron only a little way down. A box stands on it, another on the floor beside it.
+#[test]
+fn a_table_on_legs_stays_a_support() {
+    let leg = |id: u32, x: f32, y: f32| standing_box(id, Vec3::new(0.04, 0.04, 0.70), x, y);
+    let top = SceneObject {
+        id: 10,
+        mesh: {
+            let mut mesh = cube(1.0);
+            for v in &mut mesh.vertices {
+                *v *= Vec3::new(0.9, 0.6, 0.03);
+            }
+            mesh
+        },
+        world_from_object: Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.715)),
+    };
+    let apron = standing_box(11, Vec3::new(0.86, 0.02, 0.08), 0.0, -0.28);
+    let apron = SceneObject {
+        world_from_object: Affine3A::from_translation(Vec3::new(0.0, -0.28, 0.66)),
+        ..apron
+    };
+    let on_table = SceneObject {
+        id: 1,
+        mesh: cube(0.12),
+        world_from_object: Affine3A::from_translation(Vec3::new(-0.1, 0.05, 0.79)),
+    };
+    let seen = see(
+        vec![
+            table(),
+            top,
+            apron,
+            leg(12, -0.41, -0.26),
+            leg(13, 0.41, -0.26),
+            leg(14, -0.41, 0.26),
+            leg(15, 0.41, 0.26),
+            on_table,
+            standing_box(2, Vec3::new(0.15, 0.15, 0.2), 0.45, -0.55),
+        ],
+        Vec3::new(0.3, -1.9, 1.6),
+        Vec3::new(0.1, 0.0, 0.4),
+    );
+    for id in [1, 2] {
+        let (iou, pieces) = object(&seen, id);
+        // 2.4 m away, the plane band takes a little more of each object's foot.
+        assert!(pieces == 1 && iou >= 0.75, "object {id}: IoU {iou:.3}");
+    }
+    // The table's top is a support: none of its pixels is in a segment.
+    let in_segments = (0..seen.points.len())
+        .filter(|&i| seen.ids[i] == Some(10) && seen.segments[i] != 0)
+        .count();
+    assert_eq!(in_segments, 0, "table-top pixels in segments");
 }
