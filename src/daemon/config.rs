@@ -280,6 +280,10 @@ pub struct TrackSection {
     pub leave_after_s: f32,
     /// Least time between two meshings of one object, seconds. Default 0.25.
     pub remesh_interval_s: f32,
+    /// Farther than this from the sensor, metres, what is seen may add to an object seen from
+    /// nearer but never starts one. Default 3.5 (where a Kinect-class sensor's depth steps
+    /// are 4 cm: a staircase of depth levels, not a shape).
+    pub max_birth_range_m: f32,
     /// Estimate the camera's own motion or pose error from the objects standing still, and
     /// correct each frame by it (`tacmesh_track::camera_error`). Default true; a camera bolted
     /// in place, with a good extrinsic calibration, can turn it off.
@@ -292,6 +296,7 @@ impl Default for TrackSection {
             voxel_size_m: 0.005,
             leave_after_s: 1.0,
             remesh_interval_s: 0.25,
+            max_birth_range_m: 3.5,
             correct_camera: true,
         }
     }
@@ -426,6 +431,12 @@ pub const REMESH_INTERVAL_S: Bounds = Bounds {
     min: 0.001,
     max: 3_600.0,
     expected: "from 0.001 to 3600 seconds",
+};
+/// `track.max_birth_range_m`: from 10 cm to 100 m.
+pub const MAX_BIRTH_RANGE_M: Bounds = Bounds {
+    min: 0.1,
+    max: 100.0,
+    expected: "from 0.1 to 100 metres",
 };
 /// `mesh.max_residual_m`: from 10 µm to 1 m.
 pub const MAX_RESIDUAL_M: Bounds = Bounds {
@@ -576,6 +587,11 @@ impl DaemonConfig {
                 "track.remesh_interval_s",
                 self.track.remesh_interval_s,
                 &REMESH_INTERVAL_S,
+            ),
+            (
+                "track.max_birth_range_m",
+                self.track.max_birth_range_m,
+                &MAX_BIRTH_RANGE_M,
             ),
             (
                 "mesh.max_residual_m",
@@ -862,6 +878,10 @@ const KEY_WANTS: &[(&str, &str)] = &[
         "track.remesh_interval_s",
         "a time in seconds, for example 0.25",
     ),
+    (
+        "track.max_birth_range_m",
+        "a length in metres, for example 3.5",
+    ),
     ("track.correct_camera", "true or false"),
     (
         "mesh.max_residual_m",
@@ -1082,6 +1102,7 @@ mod tests {
             ("track", "voxel_size_m"),
             ("track", "leave_after_s"),
             ("track", "remesh_interval_s"),
+            ("track", "max_birth_range_m"),
             ("mesh", "max_residual_m"),
             ("stats", "publish_interval_s"),
             ("stats", "log_interval_s"),

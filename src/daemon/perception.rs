@@ -27,6 +27,7 @@ pub fn track_config(config: &DaemonConfig) -> TrackConfig {
         voxel_size_m: config.track.voxel_size_m,
         leave_after: config.leave_after(),
         remesh_interval: config.remesh_interval(),
+        max_birth_range_m: config.track.max_birth_range_m,
         estimate_camera_error: config.track.correct_camera,
         ..TrackConfig::default()
     }

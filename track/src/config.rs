@@ -35,6 +35,13 @@ pub struct TrackConfig {
     pub leave_after: Duration,
     /// Frames an object must be seen in before it is offered for meshing. Default 3.
     pub confirm_frames: u32,
+    /// A cluster whose nearest point is farther than this from the sensor may add to an
+    /// object seen from nearer, but never starts one, metres. Default 3.5: a Kinect-class
+    /// depth step there is 4.3 cm (0.0035 r²) and its noise 3 cm, ten times the mesh's
+    /// residual bound, so what is seen there is a staircase of depth levels (the slices of
+    /// floor and wall the PrimeSense and slambook recordings published at 3.3–4.2 m), not a
+    /// shape to touch.
+    pub max_birth_range_m: f32,
     /// Least time between two meshing runs of one object (capture time). Default 0.25 s.
     pub remesh_interval: Duration,
     /// Fraction of an object's voxels, weighed by their point counts capped at
@@ -158,6 +165,7 @@ impl Default for TrackConfig {
             match_distance_m: 0.08,
             leave_after: Duration::from_secs(1),
             confirm_frames: 3,
+            max_birth_range_m: 3.5,
             remesh_interval: Duration::from_millis(250),
             remesh_min_change: 0.03,
             min_cluster_points: 20,
@@ -234,6 +242,14 @@ impl TrackConfig {
                     hint,
                 });
             }
+        }
+        // Infinity is allowed: every cluster may start an object.
+        if self.max_birth_range_m.is_nan() || self.max_birth_range_m <= 0.0 {
+            return Err(TrackError::NotPositive {
+                name: "max_birth_range_m",
+                value: f64::from(self.max_birth_range_m),
+                hint: "the range beyond which the sensor sees no shape, such as 3.5",
+            });
         }
         if self.icp_max_points < self.icp_min_inliers.max(6) {
             return Err(TrackError::NotPositive {

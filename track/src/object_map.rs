@@ -42,6 +42,8 @@ pub struct FrameClusters {
 /// What one frame did to the map.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameReport {
+    /// Clusters that matched no object and were beyond `max_birth_range_m`: not objects.
+    pub too_far: usize,
     /// New objects, by id.
     pub created: Vec<u64>,
     /// Objects gone: not seen for `leave_after`, or seen through (their fused state carved
@@ -56,7 +58,7 @@ pub struct FrameReport {
     /// (same id; their next mesh replaces the old one).
     pub reset: Vec<u64>,
     /// The object each input cluster went to, in input order; `None` for clusters ignored
-    /// (fewer than `min_cluster_points` finite points).
+    /// (fewer than `min_cluster_points` finite points, or too far to start an object).
     pub cluster_ids: Vec<Option<u64>>,
     /// The correction of the camera's pose the frame was fused with: maps the frame's world
     /// (as its pose put it) onto the map's (see `crate::camera_error`). Identity while no
@@ -335,6 +337,19 @@ impl ObjectMap {
                     report.cluster_ids[ci] = Some(id);
                     continue;
                 }
+            }
+            // Far away a cluster adds to an object seen from nearer, never starts one.
+            let nearest_m = points
+                .iter()
+                .map(|p| p.distance(viewpoint))
+                .fold(f32::INFINITY, f32::min);
+            if nearest_m > self.config.max_birth_range_m {
+                debug!(
+                    points = points.len(),
+                    nearest_m, "cluster beyond the birth range: no new object"
+                );
+                report.too_far += 1;
+                continue;
             }
             let id = self.next_id;
             self.next_id += 1;

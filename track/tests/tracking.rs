@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use glam::{Affine3A, Quat, Vec3};
 use tacmesh_reconstruct::moment_grid::MomentGrid;
 use tacmesh_track::icp::{align_to_grids, truncated_cost, IcpLevel, IcpScratch, IcpSettings};
-use tacmesh_track::TrackConfig;
+use tacmesh_track::{FrameClusters, ObjectMap, TrackConfig};
 use util::*;
 
 const SIGMA_M: f32 = 0.001;
@@ -669,4 +669,42 @@ fn a_sliding_cone_is_not_turned_about_its_axis() {
         "the cone turned {:.1}° while sliding",
         largest_turn.to_degrees()
     );
+}
+
+/// Beyond `max_birth_range_m` (3.5 m) what is seen starts no object (issue 41: far slices of
+/// floor and wall); an object first seen nearer is still followed there.
+#[test]
+fn far_clusters_start_no_object_but_follow_one_seen_from_nearer() {
+    let mut map = ObjectMap::new(TrackConfig::default()).expect("valid config");
+    let mut rng = rng(5);
+    let cube = Body::Cube { half_m: 0.1 };
+    let frame = |index: u32, viewpoint: Vec3, clusters: Vec<Vec<Vec3>>| FrameClusters {
+        capture_time: FRAME * index,
+        viewpoint_m: viewpoint,
+        clusters,
+        free_space: None,
+    };
+    // A cube 4 m away: no object, in any number of frames.
+    let far = at(0.0, 0.0, 4.0);
+    for index in 0..5 {
+        let cluster = view(cube, far, Vec3::ZERO, 3000, 0.005, &mut rng);
+        let report = map.integrate(&frame(index, Vec3::ZERO, vec![cluster]));
+        assert!(report.created.is_empty());
+        assert_eq!(
+            (report.too_far, report.cluster_ids.clone()),
+            (1, vec![None])
+        );
+    }
+    assert!(map.is_empty());
+    // The same cube seen from 1.5 m is an object, and the camera backing off to 4 m keeps it.
+    let mut id = None;
+    for index in 5..15 {
+        let back = if index < 10 { 2.5 } else { 0.0 };
+        let viewpoint = Vec3::new(0.0, 0.0, back);
+        let cluster = view(cube, far, viewpoint, 3000, 0.003, &mut rng);
+        let report = map.integrate(&frame(index, viewpoint, vec![cluster]));
+        let seen = report.cluster_ids[0].expect("the cube is followed");
+        assert_eq!(*id.get_or_insert(seen), seen, "one id throughout");
+    }
+    assert_eq!(map.len(), 1);
 }
