@@ -67,7 +67,7 @@ use tacmesh_source::PointCloud;
 pub use organised::{
     segment_organised, segment_organised_timed, segment_scan, OrganisedSegmentation,
 };
-pub use planes::SupportPlane;
+pub use planes::{convex_outline, SupportPlane};
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
 /// tabletop scans at 0.5–2 m in the sensor frame; they were tuned on the labelled mOSD scans

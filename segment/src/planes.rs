@@ -370,6 +370,15 @@ fn from_ordered_bits(bits: u32) -> f32 {
     })
 }
 
+/// The convex outline of `points` projected onto the plane `normal · p = offset_m` (unit
+/// normal), as [`SupportPlane::outline`] is of a plane's inliers: counter-clockwise about
+/// `normal`, nearly straight corners dropped; empty when the points span no area. For
+/// outlines built up over frames (the daemon's supports grow as more of them is seen).
+pub fn convex_outline(points: &[Vec3], normal: Vec3, offset_m: f32) -> Vec<Vec3> {
+    let all: Vec<u32> = (0..points.len() as u32).collect();
+    outline_on_plane(points, &all, normal, offset_m)
+}
+
 /// Convex hull of the inliers projected onto the plane, by Andrew's monotone chain (Andrew,
 /// "Another efficient algorithm for convex hulls in two dimensions", IPL 1979), lifted back to
 /// 3-D, with corners flatter than [`OUTLINE_TOLERANCE_M`] dropped. Counter-clockwise about `n`.
