@@ -24,6 +24,8 @@
 //!   centroid): furniture, pieces of wall;
 //! - flat and facing up with no support below it: a strip of floor too small or too hidden to
 //!   be found as a plane (on a support, such a patch is a book or a lid: an object);
+//! - a flat layer just above a support, 20 cm or wider: a rug or a mat on the floor, which
+//!   the support's band and margin leave out (`covering_of`);
 //! - no deeper along the sensor's axis ([`SegmentConfig::forward`]) than one depth step at
 //!   their depth ([`SegmentConfig::range_step_per_m2`]): a slice of a far wall at one disparity
 //!   level, which is an artefact of the sensor, not a thing.
@@ -113,6 +115,7 @@ pub(crate) enum NotAnObject {
     OnBackground,
     PieceOfFloor,
     EdgeOfSupport,
+    CoveringOfSupport,
 }
 
 /// A support is this thick at most, in metres: a cluster that hangs no deeper below it and
@@ -194,6 +197,12 @@ pub(crate) fn background_cluster(
     if supports.iter().any(|s| edge_of(s, points, indices, band)) {
         return Some(NotAnObject::EdgeOfSupport);
     }
+    if supports
+        .iter()
+        .any(|s| covering_of(s, points, indices, centroid, band))
+    {
+        return Some(NotAnObject::CoveringOfSupport);
+    }
     None
 }
 
@@ -241,6 +250,55 @@ fn flat_and_facing_up(
         .filter(|&&i| (normal.dot(points[i as usize]) - offset).abs() <= limit)
         .count();
     near as f32 >= 0.9 * indices.len() as f32
+}
+
+/// A covering of a support (a rug, a mat, a sheet) lies no higher than this above it, in
+/// metres …
+const COVER_HEIGHT_M: f32 = 0.03;
+
+/// … is no thicker than this (or one plane band, where that is more), in metres …
+const COVER_THICKNESS_M: f32 = 0.01;
+
+/// … and at least this wide, in metres: a phone or a tablet lying flat is narrower, and
+/// thinner than the support's band and margin anyway.
+const COVER_SIZE_M: f32 = 0.2;
+
+/// Whether the cluster is a covering of `support`: a flat layer just above it, such as the rug
+/// on the milk recording's floor (24 × 24 and 28 × 27 cm patches, 8 mm thick, 2 cm above the
+/// floor's plane), which the plane's band and margin leave out. Heights are taken at the 5th
+/// and 95th percentile, so the noise's tails do not make a layer thick.
+fn covering_of(
+    support: &SupportPlane,
+    points: &[Vec3],
+    indices: &[u32],
+    centroid: Vec3,
+    band: &RangeDistance,
+) -> bool {
+    let mut heights: Vec<f32> = indices
+        .iter()
+        .map(|&i| support.signed_distance_m(points[i as usize]))
+        .collect();
+    let n = heights.len();
+    if n < 10 {
+        return false;
+    }
+    let (low_at, high_at) = (n / 20, n - 1 - n / 20);
+    let low = *heights.select_nth_unstable_by(low_at, f32::total_cmp).1;
+    let high = *heights.select_nth_unstable_by(high_at, f32::total_cmp).1;
+    let band_m = band.at(centroid);
+    if low < 0.0 || high > COVER_HEIGHT_M + band_m || high - low > COVER_THICKNESS_M.max(band_m) {
+        return false;
+    }
+    // Wide: the largest distance of a point from the centroid along the support.
+    let along = |p: Vec3| {
+        let r = p - centroid;
+        (r - support.normal * r.dot(support.normal)).length()
+    };
+    let reach = indices
+        .iter()
+        .map(|&i| along(points[i as usize]))
+        .fold(0.0f32, f32::max);
+    2.0 * reach >= COVER_SIZE_M
 }
 
 /// A support this far at least above the lowest one can be an object's top, in metres.
@@ -476,6 +534,28 @@ mod tests {
         let table = plane(Vec3::NEG_Y, -1.05, 1.2, 1.0);
         assert_eq!(
             background_cluster(&patch, &all(&patch), &[table], &[], &band, &forward),
+            None
+        );
+        // The same patch 2 cm above the floor is a rug on it; a 10 cm one there is a thing.
+        let floor = plane(Vec3::NEG_Y, -1.02, 1.2, 1.0);
+        assert_eq!(
+            background_cluster(
+                &patch,
+                &all(&patch),
+                std::slice::from_ref(&floor),
+                &[],
+                &band,
+                &forward
+            ),
+            Some(NotAnObject::CoveringOfSupport)
+        );
+        let small: Vec<Vec3> = patch
+            .iter()
+            .copied()
+            .filter(|p| p.x < -0.05 && p.z < 1.1)
+            .collect();
+        assert_eq!(
+            background_cluster(&small, &all(&small), &[floor], &[], &band, &forward),
             None
         );
         // A table top 0.8 m below the camera (up is −y), and below its front edge a strip 3 cm
