@@ -6,7 +6,7 @@
 //! (Tarjan, "Efficiency of a good but not linear set union algorithm", JACM 1975), so the
 //! result does not depend on point order.
 //!
-//! Stages in order: links (`links.rs`) → `UnionFind` → `components`; the entry points are
+//! Stages in order: links (`links.rs`) → `DisjointSets` (`sets.rs`) → `components`; the entry points are
 //! [`euclidean_clusters`] (searching the links) and [`clusters_of_links`] (links found
 //! beforehand).
 
@@ -14,42 +14,7 @@ use glam::Vec3;
 
 use crate::links::{for_each_link, Links};
 use crate::range::RangeDistance;
-
-/// Disjoint sets with path halving and union by size.
-struct UnionFind {
-    parent: Vec<u32>,
-    size: Vec<u32>,
-}
-
-impl UnionFind {
-    fn new(n: usize) -> Self {
-        Self {
-            parent: (0..n as u32).collect(),
-            size: vec![1; n],
-        }
-    }
-
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            let grandparent = self.parent[self.parent[x as usize] as usize];
-            self.parent[x as usize] = grandparent;
-            x = grandparent;
-        }
-        x
-    }
-
-    fn union(&mut self, a: u32, b: u32) {
-        let (mut a, mut b) = (self.find(a), self.find(b));
-        if a == b {
-            return;
-        }
-        if self.size[a as usize] < self.size[b as usize] {
-            std::mem::swap(&mut a, &mut b);
-        }
-        self.parent[b as usize] = a;
-        self.size[a as usize] += self.size[b as usize];
-    }
-}
+use crate::sets::DisjointSets;
 
 /// Clusters `candidates` (ascending indices of finite points) into groups chained by steps of
 /// at most `tolerance` (at the farther point's range; see `links.rs`), keeps those with
@@ -71,8 +36,10 @@ pub(crate) fn euclidean_clusters(
     }
     // Sequential: each link is a union of two (usually already joined) sets, which costs less
     // than collecting the millions of links a dense scan has for a parallel pass.
-    let mut sets = UnionFind::new(candidates.len());
-    for_each_link(points, candidates, tolerance, |a, b| sets.union(a, b));
+    let mut sets = DisjointSets::singletons(candidates.len());
+    for_each_link(points, candidates, tolerance, |a, b| {
+        sets.union(a, b);
+    });
     components(&mut sets, candidates, weights, min_points, max_points)
 }
 
@@ -97,7 +64,7 @@ pub(crate) fn clusters_of_links(
     for (k, &i) in candidates.iter().enumerate() {
         slot[i as usize] = k as u32;
     }
-    let mut sets = UnionFind::new(candidates.len());
+    let mut sets = DisjointSets::singletons(candidates.len());
     for (a, &i) in candidates.iter().enumerate() {
         for &j in links.of(i as usize) {
             if j > i && slot[j as usize] != u32::MAX {
@@ -111,7 +78,7 @@ pub(crate) fn clusters_of_links(
 /// The sets of `candidates` (by position) as point lists in ascending order, those weighing
 /// `min_points..=max_points`, largest first (ties: lowest first index first).
 fn components(
-    sets: &mut UnionFind,
+    sets: &mut DisjointSets,
     candidates: &[u32],
     weights: &[u32],
     min_points: usize,

@@ -38,6 +38,7 @@ use rustc_hash::FxHashMap;
 
 use crate::links::Links as CellLinks;
 use crate::planes::fit_plane;
+use crate::sets::DisjointSets;
 use tacmesh_source::floor_i32;
 
 /// The settings of [`split_at_concave_creases`].
@@ -281,42 +282,6 @@ fn judge_connection(a: &Patch, b: &Patch, concave_tolerance_deg: f32) -> bool {
     convex || a.normal.dot(b.normal) >= concave_tolerance_deg.to_radians().cos()
 }
 
-/// Disjoint sets with path halving and union by size (as in `clusters.rs`).
-struct Sets {
-    parent: Vec<u32>,
-    weight: Vec<usize>,
-}
-
-impl Sets {
-    fn new(weights: Vec<usize>) -> Self {
-        Self {
-            parent: (0..weights.len() as u32).collect(),
-            weight: weights,
-        }
-    }
-
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            let grandparent = self.parent[self.parent[x as usize] as usize];
-            self.parent[x as usize] = grandparent;
-            x = grandparent;
-        }
-        x
-    }
-
-    fn union(&mut self, a: u32, b: u32) {
-        let (mut a, mut b) = (self.find(a), self.find(b));
-        if a == b {
-            return;
-        }
-        if self.weight[a as usize] < self.weight[b as usize] {
-            std::mem::swap(&mut a, &mut b);
-        }
-        self.parent[b as usize] = a;
-        self.weight[a as usize] += self.weight[b as usize];
-    }
-}
-
 /// A piece of fewer patches is not an object of its own (LCCP's minimum segment size): about
 /// 50 cm² of surface at 3 cm patches. Fewer cut the stereo-scanned PCL mug's handle, a
 /// 1 cm tube, into three; on the mOSD scans 1 to 8 score alike.
@@ -338,7 +303,7 @@ fn join_patches(
     min_weight: usize,
 ) -> Vec<u32> {
     let patches = patch_weights.len();
-    let mut sets = Sets::new(patch_weights);
+    let mut sets = DisjointSets::new(patch_weights);
     if connections.iter().all(|&(_, _, joined)| joined) {
         // Every pair of adjacent pieces agrees, in every round, until no two pieces touch: the
         // pieces are the components of the connections, whatever order the rounds merge in,
@@ -409,7 +374,9 @@ fn join_patches(
             .max_by_key(|&(other, links)| (links, Reverse(other)))
             .map(|(other, _)| other);
         match into {
-            Some(other) => sets.union(small, other),
+            Some(other) => {
+                sets.union(small, other);
+            }
             None => break,
         }
     }
@@ -430,7 +397,7 @@ fn patch_links<'a>(patch_of: &'a [u32], links: &'a Links) -> impl Iterator<Item 
 /// The component of each of `patches` in the graph of the `links` between them (a patch's
 /// component named by one of its patches).
 fn components(patches: usize, links: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
-    let mut sets = Sets::new(vec![1; patches]);
+    let mut sets = DisjointSets::singletons(patches);
     for (a, b) in links {
         sets.union(a, b);
     }
@@ -444,7 +411,7 @@ type PiecesLinked = ((u32, u32), (u32, u32));
 /// Keys `between` by the pieces' current roots, drops the links inside a piece and sums those
 /// between the same two pieces: the list shrinks as pieces merge, where recounting every
 /// connection each round cost the split most of its time.
-fn contract(between: &mut Vec<PiecesLinked>, sets: &mut Sets) {
+fn contract(between: &mut Vec<PiecesLinked>, sets: &mut DisjointSets) {
     for ((a, b), _) in between.iter_mut() {
         let (ra, rb) = (sets.find(*a), sets.find(*b));
         (*a, *b) = (ra.min(rb), ra.max(rb));

@@ -56,6 +56,7 @@ mod organised;
 mod planes;
 mod range;
 mod scene;
+mod sets;
 mod voxels;
 
 use std::time::{Duration, Instant};

@@ -34,6 +34,7 @@ use rustc_hash::FxHashMap;
 
 use crate::planes::{fit_plane, SupportPlane};
 use crate::range::RangeDistance;
+use crate::sets::DisjointSets;
 use crate::SegmentConfig;
 
 /// Boundary pixels at which one piece is in front of another before that counts as hiding
@@ -106,10 +107,11 @@ struct Piece<'a> {
     planes: OnceCell<Vec<(Vec3, f32)>>,
 }
 
-/// Disjoint sets of pieces with path halving (as in `clusters.rs`), each set with its
-/// bounding box: no join makes an object larger than the largest object.
+/// The pieces' sets (`sets.rs`), each with its bounding box: no join makes an object larger
+/// than the largest object.
 struct Joins {
-    parent: Vec<u32>,
+    sets: DisjointSets,
+    /// The bounding box of each set, at its root.
     boxes: Vec<(Vec3, Vec3)>,
     max_size_m: f32,
 }
@@ -117,18 +119,14 @@ struct Joins {
 impl Joins {
     fn new(pieces: &[Piece], max_size_m: f32) -> Self {
         Self {
-            parent: (0..pieces.len() as u32).collect(),
+            sets: DisjointSets::new(pieces.iter().map(|p| p.pixels.len()).collect()),
             boxes: pieces.iter().map(|p| (p.lo, p.hi)).collect(),
             max_size_m,
         }
     }
 
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            self.parent[x as usize] = self.parent[self.parent[x as usize] as usize];
-            x = self.parent[x as usize];
-        }
-        x
+    fn find(&mut self, x: u32) -> u32 {
+        self.sets.find(x)
     }
 
     /// Joins the sets of `a` and `b` unless the two together would be larger than the
@@ -144,8 +142,8 @@ impl Joins {
         if lo.distance(hi) > self.max_size_m {
             return;
         }
-        self.parent[b as usize] = a;
-        self.boxes[a as usize] = (lo, hi);
+        let root = self.sets.union(a, b);
+        self.boxes[root as usize] = (lo, hi);
     }
 }
 
