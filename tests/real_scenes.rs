@@ -668,21 +668,13 @@ fn held_back_at_end(log: &str) -> Option<usize> {
 /// different one for each, and the daemon publishes no other object.
 #[test]
 fn mesh_objects_and_the_daemon_give_the_same_objects_on_the_labelled_scans() {
-    const SCANS: [&str; 8] = [
-        "osd_test0",
-        "osd_test17",
-        "osd_test20",
-        "osd_test26",
-        "osd_test35",
-        "osd_test38",
-        "osd_test45",
-        "osd_test57",
-    ];
+    // The eight scans, each once (the scene-change order plays the first again at its end).
+    let scans = &tacmesh_testdata::MOSD_SCENE_CHANGE[..8];
     let _one = ONE_DAEMON_AT_A_TIME
         .lock()
         .unwrap_or_else(|e| e.into_inner());
     let mut failures = Vec::new();
-    for name in SCANS {
+    for name in scans {
         let scan = test_data(&format!("pointclouds/mosd/{name}.pcd"));
         let dir = tempfile::tempdir().expect("a temporary folder");
         let out = dir.path().join("objects");

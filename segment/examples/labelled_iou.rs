@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use tacmesh_formats::pcd::read_pcd;
 use tacmesh_segment::labelled::{score, MosdKind, ScanScore};
-use tacmesh_segment::{segment_scan, SegmentConfig};
+use tacmesh_segment::{object_labels, segment_scan, SegmentConfig};
 
 struct Options {
     files: Vec<PathBuf>,
@@ -126,12 +126,7 @@ fn score_file(
         .ok_or(format!("{}: no label field", file.display()))?;
     let grid = (cloud.height > 1).then_some((cloud.width, cloud.height));
     let segmentation = segment_scan(&cloud.points, grid, stride, config, &[]);
-    let mut predicted = vec![0u32; cloud.points.len()];
-    for (k, object) in segmentation.objects.iter().enumerate() {
-        for &i in object {
-            predicted[i as usize] = k as u32 + 1;
-        }
-    }
+    let predicted = object_labels(&segmentation.objects, cloud.points.len());
     if let (Some(folder), true) = (draw, cloud.height > 1) {
         let out = folder.join(format!("{}.png", stem(file)));
         let colour = cloud.rgba.as_deref().unwrap_or(&[]);

@@ -484,13 +484,8 @@ pub fn segment_timed(
 
     let clock = Instant::now();
     let mut objects = objects;
-    objects.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
-    let mut labels = vec![0u32; points.len()];
-    for (k, object) in objects.iter().enumerate() {
-        for &i in object {
-            labels[i as usize] = k as u32 + 1;
-        }
-    }
+    largest_first(&mut objects);
+    let labels = object_labels(&objects, points.len());
     times.clusters += clock.elapsed();
     let segmentation = Segmentation {
         planes,
@@ -501,6 +496,24 @@ pub fn segment_timed(
         labels,
     };
     (segmentation, times)
+}
+
+/// One label per point of a cloud of `points` points: `k` for the points of `objects[k - 1]`
+/// (indices into the cloud), 0 for the rest; as [`Segmentation::labels`] is.
+pub fn object_labels(objects: &[Vec<u32>], points: usize) -> Vec<u32> {
+    let mut labels = vec![0u32; points];
+    for (k, object) in objects.iter().enumerate() {
+        for &i in object {
+            labels[i as usize] = k as u32 + 1;
+        }
+    }
+    labels
+}
+
+/// Objects (non-empty, each ascending) in the order [`Segmentation::objects`] lists them:
+/// largest first, then by their first index.
+pub(crate) fn largest_first(objects: &mut [Vec<u32>]) {
+    objects.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
 }
 
 /// The inlier distance of a plane at a point's range: the configured distance, or ¾ of a depth

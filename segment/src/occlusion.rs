@@ -329,13 +329,8 @@ pub(crate) fn join_hidden_pieces(
             o
         })
         .collect();
-    merged.sort_by(|a, b| b.len().cmp(&a.len()).then(a[0].cmp(&b[0])));
-    labels.iter_mut().for_each(|l| *l = 0);
-    for (k, object) in merged.iter().enumerate() {
-        for &i in object {
-            labels[i as usize] = k as u32 + 1;
-        }
-    }
+    crate::largest_first(&mut merged);
+    labels.copy_from_slice(&crate::object_labels(&merged, labels.len()));
     *objects = merged;
     filled
 }

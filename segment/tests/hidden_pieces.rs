@@ -9,9 +9,9 @@ use std::time::Duration;
 
 use glam::{Affine3A, Vec3};
 use tacmesh_segment::labelled::score;
-use tacmesh_segment::{segment_scan, SegmentConfig};
+use tacmesh_segment::{object_labels, segment_scan, SegmentConfig};
 use tacmesh_sim::{
-    cube, cylinder, look_at, DepthCameraConfig, Scene, SceneObject, SimulatedDepthCamera,
+    cube, cylinder, look_at, square, DepthCameraConfig, Scene, SceneObject, SimulatedDepthCamera,
 };
 use tacmesh_source::TriMesh;
 
@@ -85,18 +85,9 @@ fn pot(id: u32, radius: f32, wall: f32, height: f32, bottom: f32, x: f32, y: f32
 }
 
 fn table() -> SceneObject {
-    let h = 0.6;
     SceneObject {
         id: 0,
-        mesh: TriMesh::new(
-            vec![
-                Vec3::new(-h, -h, 0.0),
-                Vec3::new(h, -h, 0.0),
-                Vec3::new(h, h, 0.0),
-                Vec3::new(-h, h, 0.0),
-            ],
-            vec![[0, 1, 2], [0, 2, 3]],
-        ),
+        mesh: square(1.2),
         world_from_object: Affine3A::IDENTITY,
     }
 }
@@ -128,12 +119,7 @@ fn see(objects: Vec<SceneObject>, eye: Vec3, target: Vec3) -> Seen {
     let k = config.intrinsics;
     let segment_config = SegmentConfig::live().seen_from(config.world_from_sensor);
     let scan = segment_scan(&points, Some((k.width, k.height)), 2, &segment_config, &[]);
-    let mut segments = vec![0u32; points.len()];
-    for (s, object) in scan.objects.iter().enumerate() {
-        for &i in object {
-            segments[i as usize] = s as u32 + 1;
-        }
-    }
+    let segments = object_labels(&scan.objects, points.len());
     let truth: Vec<u32> = ids
         .iter()
         .zip(&points)

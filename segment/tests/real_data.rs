@@ -16,7 +16,9 @@ use glam::Vec3;
 use rustc_hash::FxHashMap;
 use tacmesh_formats::pcd::read_pcd;
 use tacmesh_segment::labelled::{score, ScanScore};
-use tacmesh_segment::{segment, segment_organised, segment_scan, SegmentConfig, Segmentation};
+use tacmesh_segment::{
+    object_labels, segment, segment_organised, segment_scan, SegmentConfig, Segmentation,
+};
 
 const MOSD_TEST0: &str = "pointclouds/mosd/osd_test0.pcd";
 const MOSD_TEST35: &str = "pointclouds/mosd/osd_test35.pcd";
@@ -180,13 +182,7 @@ impl Setting {
                 .objects
             }
         };
-        let mut labels = vec![0u32; points.len()];
-        for (k, object) in objects.iter().enumerate() {
-            for &i in object {
-                labels[i as usize] = k as u32 + 1;
-            }
-        }
-        (labels, objects.len())
+        (object_labels(&objects, points.len()), objects.len())
     }
 }
 

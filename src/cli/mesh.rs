@@ -6,7 +6,7 @@ use tacmesh::formats::{read_cloud_file, CloudFile, NonFinite};
 use tacmesh::glam::Vec3;
 use tacmesh::physics_scene::OfflineObject;
 use tacmesh::pipeline::{mesh_cloud, residual_for_target_mhe_m, Length, MeshConfig};
-use tacmesh::segment::{segment_scan, SegmentConfig};
+use tacmesh::segment::{object_labels, segment_scan, SegmentConfig};
 
 /// Mesh one point cloud (PLY, PCD, or XYZ text: .xyz, .txt, .pts) into one simplified mesh (PLY
 /// or OBJ).
@@ -468,12 +468,7 @@ fn mesh_objects(args: &MeshArgs, file: &CloudFile, viewpoint: Option<Vec3>) -> a
     }
     let labels_path = dir.join("labels.txt");
     // One label per point of the file: `k` for the points of object-k, 0 for the rest.
-    let mut label_of = vec![0u32; cloud.points.len()];
-    for (k, object) in objects.iter().enumerate() {
-        for &i in object {
-            label_of[i as usize] = k as u32 + 1;
-        }
-    }
+    let label_of = object_labels(&objects, cloud.points.len());
     let mut labels = String::with_capacity(label_of.len() * 2);
     for label in &label_of {
         labels.push_str(&label.to_string());
