@@ -63,7 +63,7 @@ pub use scene::{
     TABLETOP_TABLE_SIDE_M,
 };
 pub use scene_file::{SceneFile, SceneFileError, DEMO_SCENE_TOML};
-pub use shapes::{cone, cube, cylinder, fit_to_extent, torus, uv_sphere, Shape};
+pub use shapes::{cone, cube, cylinder, fit_to_extent, square, torus, uv_sphere, Shape};
 
 /// Why a mesh could not be sampled or measured.
 #[derive(Debug, thiserror::Error)]

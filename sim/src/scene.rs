@@ -78,16 +78,7 @@ impl Scene {
     ///
     /// Each object's mesh is centred on its own origin; `world_from_object` is a translation.
     pub fn tabletop() -> Scene {
-        let h = 0.5 * TABLETOP_TABLE_SIDE_M;
-        let table = TriMesh::new(
-            vec![
-                Vec3::new(-h, -h, 0.0),
-                Vec3::new(h, -h, 0.0),
-                Vec3::new(h, h, 0.0),
-                Vec3::new(-h, h, 0.0),
-            ],
-            vec![[0, 1, 2], [0, 2, 3]],
-        );
+        let table = crate::shapes::square(TABLETOP_TABLE_SIDE_M);
         let mut objects = vec![SceneObject {
             id: 0,
             mesh: table,

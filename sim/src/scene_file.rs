@@ -461,16 +461,7 @@ impl Context<'_> {
                 reason: format!("size_m must be a finite number of metres > 0 and height_m finite, got size_m {size_m} and height_m {height_m}"),
             });
         }
-        let h = 0.5 * size_m;
-        let mesh = TriMesh::new(
-            vec![
-                Vec3::new(-h, -h, 0.0),
-                Vec3::new(h, -h, 0.0),
-                Vec3::new(h, h, 0.0),
-                Vec3::new(-h, h, 0.0),
-            ],
-            vec![[0, 1, 2], [0, 2, 3]],
-        );
+        let mesh = crate::shapes::square(size_m);
         let table = DynamicObject {
             id: 0,
             name: "table".into(),

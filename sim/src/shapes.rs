@@ -126,6 +126,21 @@ pub fn fit_to_extent(mesh: &mut TriMesh, extent_m: f32) {
 // ---------------------------------------------------------------------------------------------
 // Procedural primitives. Angles are evaluated in f64 and rounded once to f32.
 
+/// A flat square of side `side_m` in the z = 0 plane, centred on the origin and facing +z
+/// (counter-clockwise seen from above): a table top, 4 vertices, 2 triangles.
+pub fn square(side_m: f32) -> TriMesh {
+    let h = 0.5 * side_m;
+    TriMesh::new(
+        vec![
+            Vec3::new(-h, -h, 0.0),
+            Vec3::new(h, -h, 0.0),
+            Vec3::new(h, h, 0.0),
+            Vec3::new(-h, h, 0.0),
+        ],
+        vec![[0, 1, 2], [0, 2, 3]],
+    )
+}
+
 /// Blender's cube: side `size_m`, centred on the origin, 8 vertices, 12 triangles.
 pub fn cube(size_m: f32) -> TriMesh {
     let h = 0.5 * size_m;
