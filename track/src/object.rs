@@ -170,6 +170,14 @@ struct Judged {
     shift_m: f32,
     turn_rad: f32,
     fit: Alignment,
+    /// The left poses the estimate goes back to ([`TrackedObject::left_poses_returned_to`]).
+    returns_to: Vec<usize>,
+}
+
+/// Whether a change of pose (`shift_m`, `turn_rad`) is beyond the dead band
+/// ([`TrackConfig::move_threshold_m`], [`TrackConfig::move_threshold_rad`]).
+fn beyond_band(shift_m: f32, turn_rad: f32, config: &TrackConfig) -> bool {
+    shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad
 }
 
 /// How far `after` is from `before` (both `world_from_object`): the shift of the object's
@@ -325,6 +333,8 @@ impl TrackedObject {
         config: &TrackConfig,
         scratch: &mut IcpScratch,
     ) -> Observed {
+        self.left_poses
+            .retain(|&(_, left)| capture_time.saturating_sub(left) <= ROCK_MEMORY);
         let predicted = self.predicted_world_from_object(capture_time);
         let stride = points_in_world.len().div_ceil(config.icp_max_points).max(1);
         let sample: Vec<Vec3> = points_in_world.iter().step_by(stride).copied().collect();
@@ -349,6 +359,7 @@ impl TrackedObject {
                 shift_m,
                 turn_rad,
                 fit,
+                returns_to,
             }) => {
                 if self.resets_in_a_row > 1 {
                     info!(
@@ -358,20 +369,11 @@ impl TrackedObject {
                     );
                 }
                 self.resets_in_a_row = 0;
-                let beyond_band = |shift_m: f32, turn_rad: f32| {
-                    shift_m > config.move_threshold_m || turn_rad > config.move_threshold_rad
-                };
-                self.left_poses
-                    .retain(|&(_, left)| capture_time.saturating_sub(left) <= ROCK_MEMORY);
                 // A move the cluster barely prefers is noise: the object stays where it is
                 // held (see `MOVE_EVIDENCE`).
-                let moves = beyond_band(shift_m, turn_rad)
+                let moves = beyond_band(shift_m, turn_rad, config)
                     && self.move_is_evident(&sample, &fit, config, scratch);
-                let returned_to: Vec<usize> = if moves {
-                    self.left_poses_returned_to(&estimate, capture_time, config)
-                } else {
-                    Vec::new()
-                };
+                let returned_to = if moves { returns_to } else { Vec::new() };
                 let rocking_back = !returned_to.is_empty();
                 if rocking_back {
                     // Not fused either: fused at the held pose, the cluster would put a copy
@@ -478,10 +480,8 @@ impl TrackedObject {
         // A pose the object is about to be held against (it goes back to one it left) is
         // not taken, so what the camera sees through there does not matter: on the TUM desk's
         // two views, an object each view aligns 25 mm apart was reset at every other frame.
-        let held_back = !self
-            .left_poses_returned_to(&estimate, capture_time, config)
-            .is_empty();
-        if let (Some(free), false) = (free, held_back) {
+        let returns_to = self.left_poses_returned_to(&estimate, capture_time, config);
+        if let (Some(free), true) = (free, returns_to.is_empty()) {
             let fraction = self.seen_through_fraction(free, estimate, config);
             if fraction > SEEN_THROUGH_MAX {
                 return Err(IcpFailure::SeenThrough {
@@ -494,6 +494,7 @@ impl TrackedObject {
             shift_m,
             turn_rad,
             fit,
+            returns_to,
         })
     }
 
@@ -613,9 +614,9 @@ impl TrackedObject {
                 })
     }
 
-    /// The left poses (remembered less than [`ROCK_MEMORY`] before `capture_time`) that a move
-    /// to `estimate` goes back to while the held pose is still being confirmed (see
-    /// [`ROCK_HOLD`], [`ROCK_BACK_SHARE`]).
+    /// The left poses (those remembered, see [`ROCK_MEMORY`]) that a move to `estimate` goes
+    /// back to while the held pose is still being confirmed (see [`ROCK_HOLD`],
+    /// [`ROCK_BACK_SHARE`]).
     fn left_poses_returned_to(
         &self,
         estimate: &Affine3A,
@@ -628,14 +629,10 @@ impl TrackedObject {
         let to_here = self.surface_move_m(&self.world_from_object, estimate);
         (0..self.left_poses.len())
             .filter(|&k| {
-                let (left, left_at) = &self.left_poses[k];
-                if capture_time.saturating_sub(*left_at) > ROCK_MEMORY {
-                    return false;
-                }
+                let left = &self.left_poses[k].0;
                 let (shift_m, turn_rad) = pose_change(left, estimate);
-                let within_band =
-                    shift_m <= config.move_threshold_m && turn_rad <= config.move_threshold_rad;
-                within_band || self.surface_move_m(left, estimate) <= ROCK_BACK_SHARE * to_here
+                !beyond_band(shift_m, turn_rad, config)
+                    || self.surface_move_m(left, estimate) <= ROCK_BACK_SHARE * to_here
             })
             .collect()
     }

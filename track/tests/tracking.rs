@@ -709,6 +709,36 @@ fn far_clusters_start_no_object_but_follow_one_seen_from_nearer() {
     assert_eq!(map.len(), 1);
 }
 
+/// What [`watch_one_object`] saw.
+struct Watched {
+    moves: usize,
+    resets: usize,
+    /// Meshing runs in the last 45 of the 90 frames.
+    late_meshing_runs: u64,
+}
+
+/// Watches one object for 90 frames (3 s), frame `i` seeing the cluster `cluster(i)`, each
+/// cluster going to object 1, with its meshing taken when due as the daemon takes it.
+fn watch_one_object(mut cluster: impl FnMut(u32) -> Vec<Vec3>) -> Watched {
+    let mut map = map();
+    let (mut moves, mut resets, mut runs_at_half) = (0, 0, 0);
+    for i in 0..90u32 {
+        let report = map.integrate(&frame(i, vec![cluster(i)]));
+        assert_eq!(report.cluster_ids, vec![Some(1)], "frame {i}");
+        moves += report.moved.len();
+        resets += report.reset.len();
+        map.take_mesh_jobs(FRAME * i);
+        if i == 44 {
+            runs_at_half = map.meshing_runs();
+        }
+    }
+    Watched {
+        moves,
+        resets,
+        late_meshing_runs: map.meshing_runs() - runs_at_half,
+    }
+}
+
 /// A still object that segmentation cuts differently in every frame (the PCL Kinect floor's
 /// clutter at the back: three looped frames, three clusters that mostly miss one another's
 /// surface) is fused as it is seen where it stands, not restarted at every other frame, and
@@ -733,22 +763,14 @@ fn a_still_object_cut_differently_in_each_frame_converges() {
         board(Vec3::Y, Vec3::Z),
         board(Vec3::X, Vec3::Z),
     ];
-    let mut map = map();
-    let mut resets = 0;
-    let mut runs_at_half = 0;
-    for i in 0..90u32 {
-        let report = map.integrate(&frame(i, vec![pieces[i as usize % 3].clone()]));
-        assert_eq!(report.cluster_ids, vec![Some(1)], "frame {i}");
-        resets += report.reset.len();
-        map.take_mesh_jobs(FRAME * i);
-        if i == 44 {
-            runs_at_half = map.meshing_runs();
-        }
-    }
-    assert!(resets <= 1, "{resets} resets in 90 frames");
+    let watched = watch_one_object(|i| pieces[i as usize % 3].clone());
+    assert!(
+        watched.resets <= 1,
+        "{} resets in 90 frames",
+        watched.resets
+    );
     assert_eq!(
-        map.meshing_runs(),
-        runs_at_half,
+        watched.late_meshing_runs, 0,
         "re-meshed in the last 45 frames"
     );
 }
@@ -762,32 +784,19 @@ fn a_still_object_cut_differently_in_each_frame_converges() {
 fn a_small_object_aligned_back_and_forth_is_held() {
     const SMALL: Body = Body::Cube { half_m: 0.025 };
     let mut rng = rng(14);
-    let mut map = map();
     let pose = showing_three_faces(Vec3::new(0.1, 0.0, 0.9));
     let other = pose
         * posed(
             Quat::from_rotation_y(10f32.to_radians()),
             Vec3::new(0.004, 0.0, 0.0),
         );
-    let mut moves = 0;
-    let mut runs_at_half = 0;
-    for i in 0..90u32 {
+    let watched = watch_one_object(|i| {
         let seen = if i % 2 == 0 { pose } else { other };
-        let report = map.integrate(&frame(
-            i,
-            vec![view(SMALL, seen, Vec3::ZERO, 2000, 0.002, &mut rng)],
-        ));
-        assert_eq!(report.cluster_ids, vec![Some(1)], "frame {i}");
-        moves += report.moved.len();
-        map.take_mesh_jobs(FRAME * i);
-        if i == 44 {
-            runs_at_half = map.meshing_runs();
-        }
-    }
-    assert!(moves <= 4, "{moves} moves in 90 frames");
+        view(SMALL, seen, Vec3::ZERO, 2000, 0.002, &mut rng)
+    });
+    assert!(watched.moves <= 4, "{} moves in 90 frames", watched.moves);
     assert_eq!(
-        map.meshing_runs(),
-        runs_at_half,
+        watched.late_meshing_runs, 0,
         "re-meshed in the last 45 frames"
     );
 }
