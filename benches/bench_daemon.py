@@ -10,6 +10,7 @@ import os
 import subprocess
 import time
 from pathlib import Path
+from typing import IO
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The release build, or what TACMESH_BIN names.
@@ -27,15 +28,19 @@ SPECS = {
 }
 
 
-def start_daemon(spec: str, socket: Path, seconds: float) -> subprocess.Popen[bytes]:
+def start_daemon(
+    spec: str, socket: Path, seconds: float, log: IO[bytes] | None = None
+) -> subprocess.Popen[bytes]:
     """`tacmesh run` on `spec` (a recording looped) for `seconds`, serving `socket`; returns
-    once the socket is there. The caller waits for the daemon to end."""
+    once the socket is there. Its log (at `info`) goes to `log`, or nowhere. The caller waits
+    for the daemon to end."""
     loop = [] if spec.startswith("sim:") else ["--loop"]
     daemon = subprocess.Popen(
         [str(TACMESH), "run", "--sensor", spec, *loop, "--socket", str(socket)]
         + ["--duration-s", str(seconds)],
         cwd=ROOT,
-        stderr=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL if log is None else log,
+        env=os.environ if log is None else {**os.environ, "RUST_LOG": "info"},
     )
     deadline = time.monotonic() + 60
     while not socket.exists():

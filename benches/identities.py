@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -25,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_daemon import ROOT, SPECS, TACMESH
+from bench_daemon import SPECS, start_daemon
 from tacmesh import FIRST_SUPPORT_ID, Shape, Subscriber
 
 SECONDS = float(os.environ.get("SECONDS_PER_RECORDING", "30"))
@@ -33,6 +32,8 @@ SECONDS = float(os.environ.get("SECONDS_PER_RECORDING", "30"))
 REPLACED_WITHIN_M = 0.10
 
 APPEARED = re.compile(r"^(\S+Z) .*object appeared id=(\d+) .*centroid=\[([^\]]+)\]")
+#: Any log line with its time and an object's id.
+LOGGED_ID = re.compile(r"^(\S+Z) .*\bid=(\d+)")
 
 
 def stamp(text: str) -> float:
@@ -46,27 +47,7 @@ def measure(name: str, spec: str) -> str:
         socket = Path(tmp) / "tacmesh.sock"
         log_path = Path(tmp) / "daemon.log"
         with open(log_path, "wb") as log:
-            daemon = subprocess.Popen(
-                [
-                    str(TACMESH),
-                    "run",
-                    "--sensor",
-                    spec,
-                    "--loop",
-                    "--socket",
-                    str(socket),
-                ]
-                + ["--duration-s", str(SECONDS)],
-                cwd=ROOT,
-                stderr=log,
-                env={**os.environ, "RUST_LOG": "info"},
-            )
-            deadline = time.monotonic() + 60
-            while not socket.exists():
-                if time.monotonic() > deadline or daemon.poll() is not None:
-                    daemon.kill()
-                    raise RuntimeError(f"{name}: the daemon did not start")
-                time.sleep(0.05)
+            daemon = start_daemon(spec, socket, SECONDS, log)
             started = time.monotonic()
             shapes_late: dict[int, int] = {}
             planes_late = 0
@@ -87,25 +68,25 @@ def measure(name: str, spec: str) -> str:
         text = log_path.read_text(errors="replace")
     births: list[tuple[float, int, np.ndarray]] = []
     removals: list[tuple[float, int]] = []
-    reset_lines = [line for line in text.splitlines() if "object reset" in line]
+    reset_at: list[tuple[float, int]] = []
     for line in text.splitlines():
         if m := APPEARED.match(line):
             centroid = np.array([float(v) for v in m.group(3).split(",")])
             births.append((stamp(m.group(1)), int(m.group(2)), centroid))
-        elif "object gone" in line or "object left" in line:
-            id_match = re.search(r"id=(\d+)", line)
-            if id_match:
-                removals.append((stamp(line.split()[0]), int(id_match.group(1))))
+        elif m := LOGGED_ID.match(line):
+            event = (stamp(m.group(1)), int(m.group(2)))
+            if "object gone" in line or "object left" in line:
+                removals.append(event)
+            elif "object reset" in line:
+                reset_at.append(event)
     if not births:
         return f"| {name} | nothing born | | | | | | | |"
     t0 = births[0][0]
     late_resets: dict[int, int] = {}
-    for line in reset_lines:
-        id_match = re.search(r"id=(\d+)", line)
-        if id_match and stamp(line.split()[0]) - t0 > SECONDS / 2:
-            i = int(id_match.group(1))
+    for t, i in reset_at:
+        if t - t0 > SECONDS / 2:
             late_resets[i] = late_resets.get(i, 0) + 1
-    resets = f"{len(reset_lines)} / {sum(late_resets.values())}" + (
+    resets = f"{len(reset_at)} / {sum(late_resets.values())}" + (
         " ("
         + ", ".join(
             f"{i}: {n}"
