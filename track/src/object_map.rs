@@ -14,7 +14,7 @@ use crate::camera_error::CameraError;
 use crate::config::{TrackConfig, TrackError};
 use crate::free_space::FreeSpace;
 use crate::icp::IcpScratch;
-use crate::object::{Observed, TrackedObject};
+use crate::object::{Fragment, Observed, TrackedObject};
 
 /// A cluster no track claimed joins the object whose fused surface (or box) holds at least
 /// this fraction of its points, instead of becoming a new object.
@@ -316,18 +316,18 @@ impl ObjectMap {
                     } else {
                         0.0
                     };
-                    let share = if inside >= FRAGMENT_COVERAGE {
-                        inside
+                    let (share, fragment) = if inside >= FRAGMENT_COVERAGE {
+                        (inside, Fragment::FarSide)
                     } else {
-                        o.coverage(points)
+                        (o.coverage(points), Fragment::OnSurface)
                     };
-                    Some((share, o.id))
+                    Some((share, o.id, fragment))
                 })
-                .filter(|&(share, _)| share >= FRAGMENT_COVERAGE)
+                .filter(|&(share, _, _)| share >= FRAGMENT_COVERAGE)
                 .max_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some((share, id)) = host {
+            if let Some((share, id, fragment)) = host {
                 if let Some(object) = self.objects.get_mut(&id) {
-                    object.fuse_fragment(points, now, &self.config);
+                    object.fuse_fragment(points, fragment, now, &self.config);
                     debug!(
                         id,
                         points = points.len(),
