@@ -369,10 +369,34 @@ def test_the_rate_cap_spaces_the_updates_of_each_object(daemon: Daemon) -> None:
         assert len(moments) <= 2 * seconds + 2, (object_id, seconds, times)
 
 
+def surface_samples(
+    vertices: npt.ArrayLike, triangles: npt.ArrayLike, count: int = 20_000
+) -> npt.NDArray[np.float64]:
+    """``count`` points spread evenly over a mesh's surface (by area), seeded."""
+    corners = np.asarray(vertices, np.float64)[np.asarray(triangles, np.int64)]
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    areas = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    rng = np.random.default_rng(0)
+    chosen = rng.choice(len(areas), size=count, p=areas / areas.sum())
+    u, v = rng.random((2, count))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    picked: npt.NDArray[np.float64] = (
+        a[chosen] + u[:, None] * (b[chosen] - a[chosen]) + v[:, None] * (c[chosen] - a[chosen])
+    )
+    return picked
+
+
 def primitives(scene: Scene) -> list[SceneObject]:
-    """The objects whose held Body is a primitive."""
+    """The objects whose held Body is a primitive made from their held Shape (a Body made from
+    an earlier shape of the same frame is kept until the next one comes, and the fused points
+    a primitive is fitted to move between the two)."""
     return [
-        o for o in scene.non_supports if o.body is not None and o.body.solid is BodySolid.PRIMITIVE
+        o
+        for o in scene.non_supports
+        if o.body is not None
+        and o.body.solid is BodySolid.PRIMITIVE
+        and o.body.shape_version == o.shape_version
     ]
 
 
@@ -382,7 +406,7 @@ def test_an_object_that_is_a_primitive_gets_a_primitive_body_where_its_shape_is(
     """The demo's cube, ball and drum can be fitted as primitives (a box, a sphere, a
     cylinder): at least one such body comes. It is the primitive alone (no mesh), weighs what
     the primitive's sizes say (a box's are half sides), and its surface, placed by the
-    primitive's rotation and centre, is where the object's shape is."""
+    primitive's rotation and centre, is where the shape it was made from is."""
     with Subscriber(daemon.socket_path, reconnect=False, timeout_s=10) as sub:
         follow(sub, lambda _: sub.scene.complete and bool(primitives(sub.scene)), WARM_UP_S)
     for o in primitives(sub.scene):
@@ -393,13 +417,16 @@ def test_an_object_that_is_a_primitive_gets_a_primitive_body_where_its_shape_is(
         assert not body.solid.is_fallback
         assert body.volume_m3 == pytest.approx(volume_of(primitive), rel=1e-3), primitive
         np.testing.assert_allclose(body.centre_of_mass, primitive.centre, atol=1e-5)
-        # The shape lies on the primitive, give or take the shape's own error and a newer
-        # shape in the same frame. The primitive is fitted to the fused points, not to the
-        # shape: where the shape's top runs on past a rim the camera does not see (by up to a
-        # meshing cell, 10-18 mm on the demo's drum) it is off the primitive by that much.
-        distances = surface_distances(primitive, o.vertices)
-        assert float(np.percentile(distances, 50)) < 0.005, (primitive, o.max_residual_m)
-        assert float(np.percentile(distances, 95)) < 0.025, (primitive, o.max_residual_m)
+        # The shape lies on the primitive, give or take the shape's own error. The primitive
+        # is fitted to the fused points, not to the shape: where the shape's top runs on past
+        # a rim the camera does not see (by up to a meshing cell, 10-18 mm on the demo's
+        # drum) it is off the primitive by that much. Measured over the shape's surface, not
+        # its vertices: a low-poly drum has half of its 30 vertices on that rim.
+        distances = surface_distances(primitive, surface_samples(o.vertices, o.triangles))
+        # Over the surface the demo's shapes are 0.3-1.1 mm off at the median and 1.6-4.8 mm
+        # at p95 (the bounds were 5 and 25 mm over the vertices).
+        assert float(np.percentile(distances, 50)) < 0.0025, (primitive, o.max_residual_m)
+        assert float(np.percentile(distances, 95)) < 0.010, (primitive, o.max_residual_m)
         solid = o.world_solid
         assert solid is not None
         np.testing.assert_allclose(

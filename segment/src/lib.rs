@@ -16,6 +16,8 @@
 //!   [`segment_organised`] on an organised cloud, [`segment_with_hints`] on any other.
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
 //!   --objects`'.
+//! - [`FlyingPixels`], [`flying_pixels`]: the pixels of an organised cloud read at a depth edge between its two
+//!   surfaces and on neither, which the daemon keeps out of fusion (`veils.rs`).
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
 //! - [`grid::VoxelGrid`]: the voxel hash grid the stages search neighbours in, for other
 //!   neighbour queries over a cloud (the offline pipeline's point-spacing estimate).
@@ -57,6 +59,7 @@ mod planes;
 mod range;
 mod scene;
 mod sets;
+mod veils;
 mod voxels;
 
 use std::time::{Duration, Instant};
@@ -69,6 +72,7 @@ pub use organised::{
     segment_organised, segment_organised_timed, segment_scan, OrganisedSegmentation,
 };
 pub use planes::{convex_outline, SupportPlane};
+pub use veils::{flying_pixels, FlyingPixels};
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
 /// tabletop scans at 0.5–2 m in the sensor frame; they were tuned on the labelled mOSD scans

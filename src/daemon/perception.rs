@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use tacmesh_segment::{segment_scan, SegmentConfig, SupportPlane};
+use tacmesh_segment::{segment_scan, FlyingPixels, SegmentConfig, SupportPlane};
 use tacmesh_source::{FrameError, Observation};
 use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
 
@@ -313,14 +313,28 @@ impl Segmenting {
             &config,
             &self.plane_hints,
         );
+        // Flying pixels stay out of fusion (see `FlyingPixels`): fused where the object is
+        // held, they grew its hidden faces, where nothing carves them back.
+        let flying =
+            organised.map(|(width, _)| FlyingPixels::new(&points, width as usize, &config));
+        let mut flying_pixels = 0usize;
         let clusters: Vec<Vec<Vec3>> = scan
             .objects
             .iter()
-            .map(|indices| indices.iter().map(|&i| points[i as usize]).collect())
+            .map(|indices| {
+                let kept: Vec<Vec3> = indices
+                    .iter()
+                    .filter(|&&i| !flying.is_some_and(|f| f.flies(i as usize)))
+                    .map(|&i| points[i as usize])
+                    .collect();
+                flying_pixels += indices.len() - kept.len();
+                kept
+            })
             .collect();
         let segmentation = scan.strided;
         counters.record(Stage::Segment, started.elapsed());
         tracing::debug!(
+            flying_pixels,
             supports = segmentation.planes.len(),
             background_planes = segmentation.background.len(),
             object_faces = segmentation.object_faces.len(),
