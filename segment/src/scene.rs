@@ -18,8 +18,9 @@
 //!   object candidates.
 //!
 //! Clusters that cannot be objects are background:
-//! - lying on a background plane (80 % of its points within [`WALL_RELIEF_M`] of it): the
-//!   bumps of a wall, a whiteboard, what the noise of a far wall leaves beside the band;
+//! - lying on the background planes (80 % of its points within [`WALL_RELIEF_M`] of one of
+//!   them): the bumps of a wall, a whiteboard, what the noise of a far wall leaves beside the
+//!   band, the corner where two walls meet (half on each);
 //! - larger than [`SegmentConfig::max_object_size_m`] (twice the largest distance from the
 //!   centroid): furniture, pieces of wall;
 //! - flat and facing up with no support below it: a strip of floor too small or too hidden to
@@ -122,7 +123,8 @@ pub(crate) enum NotAnObject {
 /// rises nowhere above it is its edge (see [`background_cluster`]).
 const SUPPORT_EDGE_DEPTH_M: f32 = 0.06;
 
-/// A cluster with at least this fraction of its points near a background plane is part of it.
+/// A cluster with at least this fraction of its points near the background planes is part of
+/// them.
 const ON_BACKGROUND_FRACTION: f32 = 0.8;
 
 /// What stands out of a wall by less than this, in metres, is part of the wall (a whiteboard,
@@ -152,17 +154,19 @@ pub(crate) fn background_cluster(
     if indices.is_empty() {
         return None;
     }
-    for plane in background {
-        let near = indices
-            .iter()
-            .filter(|&&i| {
-                let p = points[i as usize];
-                plane.signed_distance_m(p).abs() <= relief_at(band, p)
-            })
-            .count();
-        if near as f32 >= ON_BACKGROUND_FRACTION * indices.len() as f32 {
-            return Some(NotAnObject::OnBackground);
-        }
+    // On the background planes together: a cluster in the corner where two walls (or a wall
+    // and the ceiling) meet lies half on each, and on neither alone.
+    let near = indices
+        .iter()
+        .filter(|&&i| {
+            let p = points[i as usize];
+            background
+                .iter()
+                .any(|plane| plane.signed_distance_m(p).abs() <= relief_at(band, p))
+        })
+        .count();
+    if near as f32 >= ON_BACKGROUND_FRACTION * indices.len() as f32 {
+        return Some(NotAnObject::OnBackground);
     }
     let n = indices.len() as f32;
     let centroid = indices
@@ -605,6 +609,47 @@ mod tests {
         let wall = plane(normal, normal.dot(face[0]) - 0.02, 2.0, 2.0);
         assert_eq!(
             background_cluster(&face, &all(&face), &[], &[wall], &band, &config),
+            Some(NotAnObject::OnBackground)
+        );
+        // The corner where two walls 2.5 m away meet, 20 cm of each side of it: half on each
+        // wall, on neither alone, and part of them.
+        let corner = Vec3::new(0.0, 0.0, 2.5);
+        let (left, right) = (
+            Vec3::new(-1.0, 0.0, -1.0).normalize(),
+            Vec3::new(1.0, 0.0, -1.0).normalize(),
+        );
+        let mut sides = grid(
+            corner,
+            Vec3::new(-0.0095, 0.0, 0.0095),
+            Vec3::new(0.0, 0.01, 0.0),
+            15,
+        );
+        sides.extend(grid(
+            corner,
+            Vec3::new(0.0095, 0.0, 0.0095),
+            Vec3::new(0.0, 0.01, 0.0),
+            15,
+        ));
+        let walls = [
+            plane(right, right.dot(corner), 2.0, 2.0),
+            plane(left, left.dot(corner), 2.0, 2.0),
+        ];
+        for one in &walls {
+            assert_eq!(
+                background_cluster(
+                    &sides,
+                    &all(&sides),
+                    &[],
+                    std::slice::from_ref(one),
+                    &band,
+                    &config
+                ),
+                None,
+                "on one wall alone"
+            );
+        }
+        assert_eq!(
+            background_cluster(&sides, &all(&sides), &[], &walls, &band, &config),
             Some(NotAnObject::OnBackground)
         );
     }
