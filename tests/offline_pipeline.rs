@@ -778,3 +778,47 @@ fn mesh_objects_makes_the_daemons_bodies_of_a_captured_frame() {
         assert!(range.contains(&ratio), "{name}: {ratio}× its mass");
     }
 }
+
+/// `capture --segments` draws how the daemon cuts a frame: on the static tabletop, the range
+/// image beside the segmentation, in which the table is a support and the three shapes are an
+/// object each, in the first three object colours.
+#[test]
+fn capture_draws_the_daemons_segments_of_a_frame() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/static.toml");
+    let frames = dir.path().join("frames");
+    tacmesh_ok(&[
+        "capture",
+        "--sensor",
+        &format!("sim:{scene}"),
+        "--segments",
+        "-o",
+        path_str(&frames),
+    ]);
+    let file = std::fs::File::open(frames.join("frame-0-segments.png")).expect("the picture");
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .expect("a PNG");
+    let mut rgb = vec![0; reader.output_buffer_size().expect("its size")];
+    let info = reader.next_frame(&mut rgb).expect("its pixels");
+    assert_eq!((info.width, info.height), (2 * 640, 480));
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    // The right half: the segmentation.
+    let mut counts: std::collections::BTreeMap<[u8; 3], usize> = Default::default();
+    for row in rgb.chunks_exact(3 * 1280) {
+        for px in row[3 * 640..].chunks_exact(3) {
+            *counts.entry([px[0], px[1], px[2]]).or_default() += 1;
+        }
+    }
+    let support = counts.get(&[170, 200, 235]).copied().unwrap_or(0);
+    assert!(
+        support > 640 * 480 / 4,
+        "{support} support pixels: {counts:?}"
+    );
+    for object in [[230, 25, 75], [60, 180, 75], [255, 225, 25]] {
+        let n = counts.get(&object).copied().unwrap_or(0);
+        assert!(n > 1000, "{n} pixels of {object:?}: {counts:?}");
+    }
+    // A fourth object colour would be a fourth object.
+    assert_eq!(counts.get(&[0, 130, 200]), None, "{counts:?}");
+}
