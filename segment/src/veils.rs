@@ -128,11 +128,16 @@ impl<'a> FlyingPixels<'a> {
         // Where both of an edge's pixels fly, or the edge runs along a diagonal of the image,
         // the sides are not in line with the pixel: then it lies on no surface around it, in
         // any of the eight directions.
-        let (read, on_any) = NEIGHBOURS
-            .iter()
-            .filter_map(|&(du, dv)| on(du, dv))
-            .fold((0, false), |(read, any), on| (read + 1, any || on));
-        read >= 2 && !on_any
+        // Most pixels are on the first surface looked at: stop there.
+        let mut read = 0;
+        for &(du, dv) in &NEIGHBOURS {
+            match on(du, dv) {
+                Some(true) => return false,
+                Some(false) => read += 1,
+                None => {}
+            }
+        }
+        read >= 2
     }
 }
 
