@@ -708,6 +708,19 @@ fn mesh_writes_the_physics_body_of_an_offline_cloud() {
     assert!(xml.matches("<freejoint").count() >= 4, "{log}\n{xml}");
 }
 
+/// `tacmesh capture` of the static tabletop's first frame, with `extra` arguments, into
+/// `dir/frames`; returns that folder.
+fn capture_static_tabletop(dir: &std::path::Path, extra: &[&str]) -> std::path::PathBuf {
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/static.toml");
+    let frames = dir.join("frames");
+    let sensor = format!("sim:{scene}");
+    let mut args = vec!["capture", "--sensor", &sensor, "--frames", "1"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["-o", path_str(&frames)]);
+    tacmesh_ok(&args);
+    frames
+}
+
 /// `mesh --objects --mjcf` on a frame of the static tabletop captured in its z-up world frame
 /// (`tacmesh capture`, then `--up 0,0,1` and the camera as the viewpoint) makes the bodies the
 /// daemon makes: the cube a box, the ball a sphere, each near its true mass, and the torus its
@@ -716,17 +729,7 @@ fn mesh_writes_the_physics_body_of_an_offline_cloud() {
 #[test]
 fn mesh_objects_makes_the_daemons_bodies_of_a_captured_frame() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/static.toml");
-    let frames = dir.path().join("frames");
-    tacmesh_ok(&[
-        "capture",
-        "--sensor",
-        &format!("sim:{scene}"),
-        "--frames",
-        "1",
-        "-o",
-        path_str(&frames),
-    ]);
+    let frames = capture_static_tabletop(dir.path(), &[]);
     let out = dir.path().join("objects");
     let physics = dir.path().join("scene");
     // The demo camera: 1.2 m from the table's centre, 45° above it.
@@ -785,16 +788,7 @@ fn mesh_objects_makes_the_daemons_bodies_of_a_captured_frame() {
 #[test]
 fn capture_draws_the_daemons_segments_of_a_frame() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/static.toml");
-    let frames = dir.path().join("frames");
-    tacmesh_ok(&[
-        "capture",
-        "--sensor",
-        &format!("sim:{scene}"),
-        "--segments",
-        "-o",
-        path_str(&frames),
-    ]);
+    let frames = capture_static_tabletop(dir.path(), &["--segments"]);
     let file = std::fs::File::open(frames.join("frame-0-segments.png")).expect("the picture");
     let mut reader = png::Decoder::new(std::io::BufReader::new(file))
         .read_info()

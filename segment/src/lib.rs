@@ -16,7 +16,7 @@
 //!   [`segment_organised`] on an organised cloud, [`segment_with_hints`] on any other.
 //! - [`SegmentConfig::live`]: the daemon's settings for a 30 fps stream, and `tacmesh mesh
 //!   --objects`'.
-//! - [`FlyingPixels`], [`flying_pixels`]: the pixels of an organised cloud read at a depth edge between its two
+//! - [`FlyingPixels`]: the pixels of an organised cloud read at a depth edge between its two
 //!   surfaces and on neither, which the daemon keeps out of fusion (`veils.rs`).
 //! - [`SupportPlane::outline`]: a plane's extent as a convex polygon, to publish as triangles.
 //! - [`grid::VoxelGrid`]: the voxel hash grid the stages search neighbours in, for other
@@ -72,7 +72,7 @@ pub use organised::{
     segment_organised, segment_organised_timed, segment_scan, OrganisedSegmentation,
 };
 pub use planes::{convex_outline, SupportPlane};
-pub use veils::{flying_pixels, FlyingPixels};
+pub use veils::FlyingPixels;
 
 /// Parameters of [`segment`]. The defaults suit Kinect-class (PrimeSense, Xtion, RealSense)
 /// tabletop scans at 0.5–2 m in the sensor frame; they were tuned on the labelled mOSD scans

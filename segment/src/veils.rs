@@ -19,7 +19,6 @@
 //! filters named above work on normals or scan lines.
 
 use glam::Vec3;
-use rayon::prelude::*;
 
 use crate::range::RangeDistance;
 use crate::SegmentConfig;
@@ -141,18 +140,15 @@ impl<'a> FlyingPixels<'a> {
     }
 }
 
-/// [`FlyingPixels::flies`] for every pixel of an organised cloud.
-pub fn flying_pixels(points: &[Vec3], width: usize, config: &SegmentConfig) -> Vec<bool> {
-    let test = FlyingPixels::new(points, width, config);
-    (0..points.len())
-        .into_par_iter()
-        .map(|i| test.flies(i))
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`FlyingPixels::flies`] for every pixel.
+    fn flying_pixels(points: &[Vec3], width: usize, config: &SegmentConfig) -> Vec<bool> {
+        let test = FlyingPixels::new(points, width, config);
+        (0..points.len()).map(|i| test.flies(i)).collect()
+    }
 
     /// A 60 × 40 image 1 m from the camera (x right, y down, z forward): a wall at 1.3 m and,
     /// on the left half of the rows, a board at 1.0 m in front of it.

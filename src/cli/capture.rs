@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use tacmesh::daemon::config::SensorSection;
-use tacmesh::daemon::{DaemonConfig, SensorSpec};
+use tacmesh::daemon::{points_in_workspace, segment_config, DaemonConfig, SensorSpec};
 use tacmesh::glam::Vec3;
 use tacmesh::segment::{segment_scan, FlyingPixels, SegmentConfig};
 use tacmesh::source::{Observation, PointCloud};
@@ -127,13 +127,11 @@ pub fn run(args: CaptureArgs) -> anyhow::Result<()> {
             let path = args.out.join(format!("frame-{k}-segments.png"));
             match grid {
                 Some((width, height)) => {
-                    // The daemon's settings, as `tacmesh run` with this config would segment.
-                    let segment_config = SegmentConfig {
-                        max_object_size_m: config.workspace.max_object_size_m,
-                        ..SegmentConfig::live().seen_from(world_from_sensor)
-                    };
+                    // As `tacmesh run` with this config would segment the frame.
+                    let segment_config = segment_config(&config.workspace, world_from_sensor);
+                    let in_workspace = points_in_workspace(&config.workspace, &organised);
                     let picture = segments_picture(
-                        &organised,
+                        in_workspace.as_deref().unwrap_or(&organised),
                         (width as usize, height as usize),
                         config.pipeline.segment_stride,
                         &segment_config,
@@ -209,14 +207,13 @@ fn segments_picture(
     }
     let flying = FlyingPixels::new(points, width, config);
     let viewpoint = config.viewpoint_m;
-    let ranges: Vec<f32> = points
+    let (near, far) = points
         .iter()
         .filter(|p| p.is_finite())
         .map(|p| p.distance(viewpoint))
-        .collect();
-    let (near, far) = ranges.iter().fold((f32::INFINITY, 0.0f32), |(lo, hi), &r| {
-        (lo.min(r), hi.max(r))
-    });
+        .fold((f32::INFINITY, 0.0f32), |(lo, hi), r| {
+            (lo.min(r), hi.max(r))
+        });
     let on = |planes: &[tacmesh::segment::SupportPlane], p: Vec3| {
         let band = config.plane_distance_at(p);
         planes

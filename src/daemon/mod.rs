@@ -44,6 +44,8 @@ pub use config::{ConfigError, DaemonConfig};
 pub use counters::CounterSnapshot;
 pub use mesher::MAX_FUSED_POINTS;
 pub use perception::track_config;
+/// What the daemon segments of a frame, and with which settings (`tacmesh capture --segments`).
+pub use perception::{points_in_workspace, segment_config};
 pub use sensor::{SensorError, SensorSpec};
 
 use crate::frame_ring::FrameRing;

@@ -9,12 +9,12 @@
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 use tacmesh_segment::{segment_scan, FlyingPixels, SegmentConfig, SupportPlane};
 use tacmesh_source::{FrameError, Observation};
 use tacmesh_track::{FrameClusters, FreeSpace, ObjectMap, TrackConfig};
 
-use super::config::DaemonConfig;
+use super::config::{DaemonConfig, WorkspaceSection};
 
 use super::counters::{Counters, Stage};
 use super::planes::PlaneTracker;
@@ -41,7 +41,6 @@ pub struct Perception {
 
 /// The segmenting half's state between frames.
 struct Segmenting {
-    segment: SegmentConfig,
     /// Last frame's planes (supports, background, object faces): segmentation refines them
     /// instead of searching anew.
     plane_hints: Vec<SupportPlane>,
@@ -77,12 +76,32 @@ struct FrameWork {
     supports: Vec<SupportPlane>,
 }
 
+/// The segmentation settings the daemon uses on a frame whose sensor is at
+/// `world_from_sensor`, within `workspace`.
+pub fn segment_config(workspace: &WorkspaceSection, world_from_sensor: Affine3A) -> SegmentConfig {
+    SegmentConfig {
+        max_object_size_m: workspace.max_object_size_m,
+        ..SegmentConfig::live().seen_from(world_from_sensor)
+    }
+}
+
+/// The points the daemon segments of a frame's world `points`: those outside a bounded
+/// `workspace` box as no reading (the picture keeps its pixel grid); `None` for an unbounded
+/// one, which takes them all.
+pub fn points_in_workspace(workspace: &WorkspaceSection, points: &[Vec3]) -> Option<Vec<Vec3>> {
+    workspace.is_bounded().then(|| {
+        points
+            .iter()
+            .map(|&p| if workspace.contains(p) { p } else { Vec3::NAN })
+            .collect()
+    })
+}
+
 impl Perception {
     /// The object map is built by the caller, so that a bad track config fails at start.
     pub fn new(objects: ObjectMap) -> Self {
         Self {
             segmenting: Segmenting {
-                segment: SegmentConfig::live(),
                 plane_hints: Vec::new(),
                 malformed_logged: false,
                 empty_frame_logged: false,
@@ -290,21 +309,13 @@ impl Segmenting {
         let viewpoint = Vec3::from(world_from_sensor.translation);
         // Outside the workspace box nothing is segmented; the free space still sees it all.
         let workspace = &shared.config.workspace;
-        let in_workspace: Option<Vec<Vec3>> = workspace.is_bounded().then(|| {
-            points
-                .iter()
-                .map(|&p| if workspace.contains(p) { p } else { Vec3::NAN })
-                .collect()
-        });
+        let in_workspace = points_in_workspace(workspace, &points);
         let segment_points = in_workspace.as_deref().unwrap_or(&points);
         counters.record(Stage::Deproject, started.elapsed());
 
         let started = Instant::now();
         let stride = shared.config.pipeline.segment_stride.max(1);
-        let config = SegmentConfig {
-            max_object_size_m: workspace.max_object_size_m,
-            ..self.segment.clone().seen_from(world_from_sensor)
-        };
+        let config = segment_config(workspace, world_from_sensor);
         // `tacmesh mesh --objects` makes this same call on a scan.
         let scan = segment_scan(
             segment_points,
